@@ -1,0 +1,5 @@
+import sys
+
+from motorid.cli import main
+
+sys.exit(main())

@@ -1,0 +1,22 @@
+"""JAX set-up shared by every module: float64 and a persistent compile cache.
+
+The cache lives in ``$MOTORID_CACHE_DIR`` (default ``~/.cache/motorid/jax``) so
+that a second CLI run does not pay the XLA compiles again.
+"""
+
+import os
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+_cache = os.environ.get(
+    "MOTORID_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "motorid", "jax")
+)
+try:
+    os.makedirs(_cache, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", _cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+except (OSError, AttributeError):  # read-only home: run without the cache
+    pass

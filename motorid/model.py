@@ -1,0 +1,252 @@
+"""The one motor model: known data (MotorSpec), unknowns (parameters), predict().
+
+Everything that simulates, fits, samples or searches for missing physics calls
+:func:`predict` (running samples) and :func:`predict_breakaway` (startability
+events).  Extra physics from the discrepancy catalog enters as *mechanisms*:
+objects that add their terms to the channels this module computes, never a
+second copy of the model.
+
+Parameters are a plain ``dict`` of name → scalar (a JAX pytree), named as in
+MODEL.md: ``Kv``, ``KF``, ``KFS``, ``TFc``, ``Ks``, ``KL0``, ``KL_a1``,
+``KL_b1`` (``KL_a2``, … for more harmonics), ``KAB``; SI units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from motorid import _jaxconfig  # noqa: F401
+from motorid.physics import flow, torque
+from motorid.physics.kinematics import port_a_sum, port_a_sum_approx, ripple_coefficients
+from motorid.spec import MotorSpec  # noqa: F401  (re-exported)
+
+
+@dataclass(frozen=True)
+class ParameterInfo:
+    """What a parameter means: unit, words, sign constraint and a typical size."""
+
+    unit: str
+    meaning: str
+    positive: bool
+    typical: float
+
+
+BASE_PARAMETERS: dict[str, ParameterInfo] = {
+    "Kv": ParameterInfo("-", "viscous torque coefficient, T_v = −K_v D μ ω (Eq. 24)", True, 1e3),
+    "KF": ParameterInfo("-", "bearing Coulomb friction per unit port-pressure sum, running (Eq. 25)", True, 1e-3),
+    "KFS": ParameterInfo("-", "extra bearing friction coefficient while stuck (static, Eq. 25)", True, 1e-2),
+    "TFc": ParameterInfo("N·m", "seal and piston Coulomb friction torque, running (Eq. 27)", True, 1.0),
+    "Ks": ParameterInfo("-", "static multiplier of T_Fc while stuck (Eq. 27)", True, 1.0),
+    "KL0": ParameterInfo("m³", "mean port-to-case leakage coefficient K_L0 (Eq. 52-53)", True, 1e-13),
+    "KAB": ParameterInfo("m³", "cross-port leakage coefficient (Eq. 58)", True, 1e-13),
+}
+
+
+def _harmonic_info(kind: str, m: int) -> ParameterInfo:
+    trig = "cos" if kind == "a" else "sin"
+    return ParameterInfo("-", f"K_L(θ) Fourier coefficient of {trig}({m}·nθ), relative to K_L0", False, 0.1)
+
+
+def parameter_names(harmonics: int = 1) -> list[str]:
+    """Names of the base parameters for a K_L(θ) series of ``harmonics`` orders."""
+    names = ["Kv", "KF", "KFS", "TFc", "Ks", "KL0"]
+    for m in range(1, harmonics + 1):
+        names += [f"KL_a{m}", f"KL_b{m}"]
+    return names + ["KAB"]
+
+
+def parameter_info(name: str, mechanisms: Sequence = ()) -> ParameterInfo:
+    """Metadata of a base parameter or of a mechanism's parameter ``id.name``."""
+    if name in BASE_PARAMETERS:
+        return BASE_PARAMETERS[name]
+    if name.startswith("KL_") and name[3] in "ab" and name[4:].isdigit():
+        return _harmonic_info(name[3], int(name[4:]))
+    for mech in mechanisms:
+        if name in mech.parameters:
+            return mech.parameters[name]
+    raise KeyError(f"unknown parameter '{name}'")
+
+
+class Samples(NamedTuple):
+    """Operating point of each sample, SI, all arrays of one shape.
+
+    theta [rad], speed ω [rad/s], acceleration α [rad/s²], p_a, p_b, p_case
+    [Pa gauge], viscosity μ [Pa·s], direction sgn ω [-] (±1; the run's direction
+    in a fit, so sensor noise at very low speed cannot flip friction), port_sum
+    S(θ) [-] (depends on no parameter, so it is computed once), temperature [°C]
+    and time [s] (for mechanisms that need them).
+    """
+
+    theta: jax.Array
+    speed: jax.Array
+    acceleration: jax.Array
+    p_a: jax.Array
+    p_b: jax.Array
+    p_case: jax.Array
+    viscosity: jax.Array
+    direction: jax.Array
+    port_sum: jax.Array
+    temperature: jax.Array
+    time: jax.Array
+
+
+def make_samples(spec: MotorSpec, theta, speed, p_a, p_b, p_case, viscosity, acceleration=None,
+                 direction=None, temperature=None, time=None, ripple: str = "exact") -> Samples:
+    """Assemble :class:`Samples`, computing the parameter-free S(θ) once.
+
+    ripple : "exact" (per-piston sum, Eq. 7/36) or "approx" (Eq. 8-10/38-40).
+    """
+    theta = jnp.asarray(theta, dtype=jnp.float64)
+    speed = jnp.asarray(speed, dtype=jnp.float64)
+    like = jnp.zeros_like(theta)
+    if ripple == "exact":
+        s = port_a_sum(theta, spec.pistons)
+    elif ripple == "approx":
+        c1, c2, _ = ripple_coefficients(spec.pistons)
+        s = port_a_sum_approx(theta, spec.pistons, c1, c2)
+    else:
+        raise ValueError(f"ripple must be 'exact' or 'approx', got {ripple!r}")
+    as_arr = lambda x, default: like + (default if x is None else jnp.asarray(x, dtype=jnp.float64))  # noqa: E731
+    return Samples(
+        theta=theta,
+        speed=like + speed,
+        acceleration=as_arr(acceleration, 0.0),
+        p_a=as_arr(p_a, 0.0),
+        p_b=as_arr(p_b, 0.0),
+        p_case=as_arr(p_case, 0.0),
+        viscosity=as_arr(viscosity, 0.0),
+        direction=like + (jnp.sign(speed) if direction is None else jnp.asarray(direction, dtype=jnp.float64)),
+        port_sum=s,
+        temperature=as_arr(temperature, 40.0),
+        time=as_arr(time, 0.0),
+    )
+
+
+class Channels(NamedTuple):
+    """Predicted bench channels, SI: shaft torque to the load [N·m], flow into
+    port A, into port B and out of the case drain [m³/s]."""
+
+    torque: jax.Array
+    q_a: jax.Array
+    q_b: jax.Array
+    q_case: jax.Array
+
+
+def leakage_harmonics(params: dict, harmonics: int):
+    """(a_1..a_M), (b_1..b_M) of K_L(θ) from a parameter dict."""
+    a = [params.get(f"KL_a{m}", 0.0) for m in range(1, harmonics + 1)]
+    b = [params.get(f"KL_b{m}", 0.0) for m in range(1, harmonics + 1)]
+    return a, b
+
+
+def _harmonic_count(params: dict) -> int:
+    return sum(1 for k in params if k.startswith("KL_a"))
+
+
+def base_channels(params: dict, spec: MotorSpec, s: Samples) -> Channels:
+    """The 1992 model of every running channel (Eq. 7, 17, 24-28, 36, 52-61)."""
+    D, n = spec.displacement, spec.pistons
+    t_p = torque.pressure_torque(s.theta, s.p_a, s.p_b, D, n, port_sum=s.port_sum)
+    t_j = torque.inertia_torque(spec.inertia, s.acceleration)
+    t_v = torque.viscous_torque(params["Kv"], D, s.viscosity, s.speed)
+    t_f1 = torque.bearing_friction_torque(params["KF"], D, s.p_a, s.p_b, s.direction)
+    t_f2 = torque.seal_friction_torque(params["TFc"], s.direction)
+    t_l = torque.load_torque(t_p, t_j, t_v, t_f1, t_f2)
+
+    a, b = leakage_harmonics(params, _harmonic_count(params))
+    k_la = flow.leakage_coefficient(s.theta, params["KL0"], a, b, n)
+    k_lb = flow.leakage_coefficient(s.theta - spec.phase, params["KL0"], a, b, n)
+    q_la = flow.port_to_case_leakage(k_la, s.p_a, s.p_case, s.viscosity)
+    q_lb = flow.port_to_case_leakage(k_lb, s.p_b, s.p_case, s.viscosity)
+    q_ab = flow.cross_port_leakage(params["KAB"], s.p_a, s.p_b, s.viscosity)
+    q_swept = flow.swept_flow_a(s.theta, s.speed, D, n, port_sum=s.port_sum)
+    q_an, q_bn, q_cn = flow.net_flows(q_swept, q_la, q_lb, q_ab)
+    return Channels(t_l, q_an, q_bn, q_cn)
+
+
+def predict(params: dict, spec: MotorSpec, samples: Samples, mechanisms: Sequence = ()) -> Channels:
+    """Predicted running channels at every sample: the base model plus mechanisms.
+
+    params : parameter dict (SI); spec : motor data; samples : :class:`Samples`
+    mechanisms : extra physics from :mod:`motorid.discrepancy.catalog`, each adding
+        its terms through ``mechanism.running(params, spec, samples, channels)``.
+    """
+    ch = base_channels(params, spec, samples)
+    for mech in mechanisms:
+        ch = mech.running(params, spec, samples, ch)
+    return ch
+
+
+def static_friction_limit(params: dict, spec: MotorSpec, p_a, p_b):
+    """Breakaway torque T_break = D(P_A+P_B)(K_F+K_FS) + T_Fc(1+K_s) [N·m] (MODEL.md)."""
+    return torque.breakaway_torque(params["KF"], params["KFS"], params["TFc"], params["Ks"],
+                                   spec.displacement, p_a, p_b)
+
+
+def predict_breakaway(params: dict, spec: MotorSpec, events: Samples, mechanisms: Sequence = ()):
+    """Held load torque read at the breakaway instant of a startability run [N·m].
+
+    At breakaway the pressure torque exceeds the held load by exactly the static
+    friction limit, in the direction the shaft then moves:
+    T_held = T_p(θ, ΔP) − sgn ω · T_break(P_A, P_B).  ``events`` are
+    :class:`Samples` at the breakaway instants (``direction`` = the way the
+    shaft breaks away; speed zero).
+    """
+    D, n = spec.displacement, spec.pistons
+    t_p = torque.pressure_torque(events.theta, events.p_a, events.p_b, D, n, port_sum=events.port_sum)
+    limit = static_friction_limit(params, spec, events.p_a, events.p_b)
+    for mech in mechanisms:
+        limit = mech.static_limit(params, spec, events, limit)
+    held = t_p - events.direction * limit
+    for mech in mechanisms:
+        held = mech.breakaway_reading(params, spec, events, held)
+    return held
+
+
+def default_parameters(spec: MotorSpec | None = None) -> dict:
+    """Plausible values for a motor of spec's size (a starting point, not a fit)."""
+    harmonics = 1 if spec is None else spec.leak_harmonics
+    p = {name: parameter_info(name).typical for name in parameter_names(harmonics)}
+    for m in range(1, harmonics + 1):
+        p[f"KL_a{m}"] = 0.0
+        p[f"KL_b{m}"] = 0.0
+    return p
+
+
+def as_jax(params: dict) -> dict:
+    return {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
+
+
+def as_float(params: dict) -> dict:
+    return {k: float(np.asarray(v)) for k, v in params.items()}
+
+
+class ParameterTransform:
+    """Map a parameter dict to an unconstrained vector for the optimizers and back.
+
+    Positive parameters (``ParameterInfo.positive``) go through a log, the others
+    are divided by a scale: x = log(p/s) or x = p/s.  ``scales`` default to each
+    parameter's typical size.
+    """
+
+    def __init__(self, names: Sequence[str], scales: dict | None = None, mechanisms: Sequence = ()):
+        self.names = list(names)
+        infos = [parameter_info(n, mechanisms) for n in self.names]
+        self.positive = np.array([i.positive for i in infos])
+        sc = {n: i.typical for n, i in zip(self.names, infos)}
+        if scales:
+            sc.update({k: abs(float(v)) for k, v in scales.items() if k in sc and float(v) != 0.0})
+        self.scales = np.array([sc[n] for n in self.names])
+
+    def to_unconstrained(self, params: dict):
+        v = jnp.stack([jnp.asarray(params[n], dtype=jnp.float64) for n in self.names]) / self.scales
+        return jnp.where(self.positive, jnp.log(jnp.where(self.positive, v, 1.0)), v)
+
+    def from_unconstrained(self, x) -> dict:
+        v = jnp.where(self.positive, jnp.exp(x), x) * self.scales
+        return {n: v[i] for i, n in enumerate(self.names)}

@@ -1,0 +1,56 @@
+"""Flows through a bent-axis motor, Bartos 1992 Eq. 36-37, 52-61.
+
+Positive flow goes into the motor through a port, or into the case (and leaves
+by the case drain).  Pressures gauge [Pa], viscosity μ [Pa·s], flows [m³/s].
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from motorid import _jaxconfig  # noqa: F401
+from motorid.physics.kinematics import port_a_sum
+
+
+def swept_flow_a(theta, speed, displacement, pistons: int, port_sum=None):
+    """Flow swept by the pistons into port A, exact, Eq. 36 [m³/s].
+
+    Q_A = (D ω / 2n) S(θ); Q_B = −Q_A (Eq. 37, 42).  Mean D ω / 2π (Eq. 43).
+    """
+    s = port_a_sum(theta, pistons) if port_sum is None else port_sum
+    return displacement * speed / (2.0 * pistons) * s
+
+
+def leakage_coefficient(theta, KL0, harmonics_cos, harmonics_sin, pistons: int):
+    """K_L(θ) = K_L0 [1 + Σ_m a_m cos(m n θ) + b_m sin(m n θ)] [m³].
+
+    The port-to-case leakage coefficient repeats every piston pitch (Eq. 52-55,
+    MODEL.md).  harmonics_cos/sin : sequences (a_1..a_M), (b_1..b_M) [-].
+    """
+    theta = jnp.asarray(theta)
+    shape = jnp.ones_like(theta)
+    for m, (a, b) in enumerate(zip(harmonics_cos, harmonics_sin), start=1):
+        shape = shape + a * jnp.cos(m * pistons * theta) + b * jnp.sin(m * pistons * theta)
+    return KL0 * shape
+
+
+def port_to_case_leakage(coefficient, p_port, p_case, viscosity):
+    """Laminar leakage from a port to the case, Eq. 52-53: K_L (P − P_c)/μ [m³/s]."""
+    return coefficient * (p_port - p_case) / viscosity
+
+
+def cross_port_leakage(KAB, p_a, p_b, viscosity):
+    """Laminar leakage from port A to port B, Eq. 58: K_AB (P_A − P_B)/μ [m³/s]."""
+    return KAB * (p_a - p_b) / viscosity
+
+
+def net_flows(swept_a, leak_a, leak_b, cross):
+    """Net flows measured on the bench, Eq. 59-61 [m³/s].
+
+    returns (Q_AN, Q_BN, Q_CN): into port A, into port B, into the case.
+    Mass balance Q_AN + Q_BN = Q_CN holds identically (Q_B = −Q_A).
+    """
+    q_an = swept_a + leak_a + cross
+    q_bn = -swept_a + leak_b - cross
+    q_cn = leak_a + leak_b
+    return q_an, q_bn, q_cn
