@@ -1,0 +1,1 @@
+"""When model and recordings differ: locate, name the missing physics, model it."""
