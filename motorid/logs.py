@@ -6,14 +6,19 @@ Inside motorid a log is a ``pandas.DataFrame`` with the canonical SI columns of
 
 from __future__ import annotations
 
+import csv
 import gzip
 import io
 import os
+import re
 import tempfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from motorid.errors import InputError
 
 # canonical SI column  ← file column in the format's own units, factor to SI
 FORMAT_COLUMNS = {
@@ -90,3 +95,379 @@ def write_log(frame: pd.DataFrame, path, full_precision: bool = False) -> Path:
             os.unlink(tmp)
         raise
     return path
+
+
+# --------------------------------------------------------------------------- reading
+#
+# A header is read as  <quantity>_<unit>  after normalization (strip, lower case,
+# brackets / slashes / spaces / hyphens → "_", "·" and "." dropped, "°" → "deg"),
+# so "P_A [bar]", "p_a_bar" and " p_A_BAR " are one column.  Lower case cannot
+# confuse units here because the quantity fixes the family: "mpa" of a pressure is
+# MPa, "mpas" of a viscosity is mPa·s.
+
+_PSI = 6894.757293168361  # Pa per lbf/in²
+_US_GALLON = 3.785411784e-3  # m³
+_LBF_FT = 1.3558179483314004  # N·m per lbf·ft
+
+_TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "min": 60.0}
+_ANGLE_UNITS = {"rad": 1.0, "deg": np.pi / 180.0, "degree": np.pi / 180.0, "degrees": np.pi / 180.0,
+                "rev": 2.0 * np.pi}
+_SPEED_UNITS = {"rad_s": 1.0, "rpm": 2.0 * np.pi / 60.0, "rev_min": 2.0 * np.pi / 60.0,
+                "r_min": 2.0 * np.pi / 60.0, "1_min": 2.0 * np.pi / 60.0, "deg_s": np.pi / 180.0,
+                "rps": 2.0 * np.pi, "rev_s": 2.0 * np.pi}
+_TORQUE_UNITS = {"nm": 1.0, "n_m": 1.0, "knm": 1e3, "kn_m": 1e3, "lbf_ft": _LBF_FT, "ft_lbf": _LBF_FT,
+                 "lbf_in": _LBF_FT / 12.0, "in_lbf": _LBF_FT / 12.0}
+_PRESSURE_UNITS = {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5, "barg": 1e5, "bar_g": 1e5,
+                   "mbar": 1e2, "psi": _PSI, "psig": _PSI}
+_FLOW_UNITS = {"m3_s": 1.0, "m3_h": 1.0 / 3600.0, "l_s": 1e-3, "lps": 1e-3, "lpm": 1e-3 / 60.0,
+               "l_min": 1e-3 / 60.0, "ml_s": 1e-6, "ml_min": 1e-6 / 60.0, "cm3_s": 1e-6,
+               "cm3_min": 1e-6 / 60.0, "cc_min": 1e-6 / 60.0, "gpm": _US_GALLON / 60.0,
+               "usgpm": _US_GALLON / 60.0, "gal_min": _US_GALLON / 60.0}
+_TEMPERATURE_UNITS = {"c": lambda x: x, "degc": lambda x: x, "celsius": lambda x: x,
+                      "k": lambda x: x - 273.15, "kelvin": lambda x: x - 273.15,
+                      "f": lambda x: (x - 32.0) * 5.0 / 9.0, "degf": lambda x: (x - 32.0) * 5.0 / 9.0}
+_VISCOSITY_UNITS = {"pa_s": 1.0, "pas": 1.0, "mpa_s": 1e-3, "mpas": 1e-3, "cp": 1e-3,
+                    # kinematic: converted with the oil density of the motor spec
+                    "cst": ("kinematic", 1e-6), "mm2_s": ("kinematic", 1e-6), "m2_s": ("kinematic", 1.0)}
+
+
+class _Quantity:
+    """One logged quantity: its canonical SI column, words, header names and units."""
+
+    def __init__(self, si: str, words: str, example: str, bases: tuple, units: dict):
+        self.si, self.words, self.example, self.bases, self.units = si, words, example, bases, units
+        suffix = example[len(bases[0]) + 1:]
+        self.hint = ", ".join(["_" + suffix] + [f"_{u}" for u in units if u != suffix.lower()][:2])
+
+
+_QUANTITIES = [
+    _Quantity("time_s", "time", "time_s", ("time",), _TIME_UNITS),
+    _Quantity("theta_rad", "shaft angle", "shaft_angle_deg", ("shaft_angle", "theta"), _ANGLE_UNITS),
+    _Quantity("speed_rad_s", "shaft speed", "speed_rpm", ("speed", "shaft_speed", "omega"), _SPEED_UNITS),
+    _Quantity("torque_Nm", "shaft torque", "torque_Nm", ("torque", "shaft_torque"), _TORQUE_UNITS),
+    _Quantity("p_a_Pa", "port A pressure", "p_a_bar", ("p_a",), _PRESSURE_UNITS),
+    _Quantity("p_b_Pa", "port B pressure", "p_b_bar", ("p_b",), _PRESSURE_UNITS),
+    _Quantity("p_case_Pa", "case pressure", "p_case_bar", ("p_case",), _PRESSURE_UNITS),
+    _Quantity("q_a_m3_s", "port A flow", "q_a_lpm", ("q_a",), _FLOW_UNITS),
+    _Quantity("q_b_m3_s", "port B flow", "q_b_lpm", ("q_b",), _FLOW_UNITS),
+    _Quantity("q_case_m3_s", "case drain flow", "q_case_lpm", ("q_case",), _FLOW_UNITS),
+    _Quantity("oil_temp_C", "oil temperature", "oil_temp_C",
+              ("oil_temp", "oil_temperature"), _TEMPERATURE_UNITS),
+    _Quantity("viscosity_Pa_s", "oil viscosity", "viscosity_mPas", ("viscosity", "oil_viscosity", "mu"),
+              _VISCOSITY_UNITS),
+]
+_BY_SI = {q.si: q for q in _QUANTITIES}
+# normalized header → (quantity, unit)
+_HEADERS = {f"{b}_{u}": (q, u) for q in _QUANTITIES for b in q.bases for u in q.units}
+_TEXT_HEADERS = {"run_id": "run_id", "runid": "run_id", "run": "run_id", "protocol": "protocol"}
+_REQUIRED = [q.si for q in _QUANTITIES if q.si != "viscosity_Pa_s"]
+_NA_STRINGS = ["", "nan", "NaN", "NAN", "-nan", "NA", "N/A", "n/a", "#N/A", "null", "NULL", "None",
+               "none", "-", "--", "<NA>"]
+
+
+def normalize_header(name: str) -> str:
+    """Header → its normalized form: "P_A [bar]" → "p_a_bar", "Oil Temp (°C)" → "oil_temp_degc"."""
+    s = str(name).strip().lower()
+    for a, b in (("°", "deg"), ("³", "3"), ("²", "2"), ("·", ""), ("*", ""), ("^", ""), ("µ", "u")):
+        s = s.replace(a, b)
+    s = re.sub(r"(?<=[a-z0-9])\.(?=[a-z])", "", s)  # "N.m", "mPa.s"
+    s = re.sub(r"[\s/\\()\[\]{}\-,;:]+", "_", s)
+    return re.sub(r"_+", "_", s).strip("_")
+
+
+def _unit_hint(norm: str):
+    """The quantity a header seems to name, when its unit suffix is not understood."""
+    for q in _QUANTITIES:
+        for b in q.bases:
+            if len(b) > 1 and (norm == b or norm.startswith(b + "_")):
+                return q
+    return None
+
+
+def _read_text(path: Path) -> str:
+    """File bytes → text: gunzip (by magic bytes), refuse binary, decode."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read log file ({exc.strerror or exc})") from None
+    if not raw:
+        raise InputError(f"{path}: empty file")
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise InputError(f"{path}: corrupt gzip data ({exc})") from None
+        if not raw:
+            raise InputError(f"{path}: empty file (empty gzip content)")
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        try:
+            return raw.decode("utf-16")
+        except UnicodeDecodeError:
+            raise InputError(f"{path}: not a text CSV file (undecodable UTF-16)") from None
+    head = raw[:65536]
+    control = sum(head.count(bytes([c])) for c in range(32) if c not in (9, 10, 13))
+    if b"\x00" in head or control > 0.01 * len(head):
+        raise InputError(f"{path}: not a text CSV file (binary content)")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _split_header(path: Path, text: str):
+    """(header fields, delimiter, body text, 1-based line number of the header)."""
+    lines = text.splitlines(keepends=True)
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        if stripped and not stripped.startswith("#"):
+            break
+    else:
+        raise InputError(f"{path}: empty file (no header line)")
+    header = lines[i]
+    counts = {d: header.count(d) for d in (",", ";", "\t")}
+    delim = max(counts, key=counts.get) if max(counts.values()) > 0 else ","
+    fields = next(csv.reader([header.rstrip("\r\n")], delimiter=delim, skipinitialspace=True))
+    return [f.strip() for f in fields], delim, "".join(lines[i + 1:]), i + 1
+
+
+def _map_columns(path: Path, fields: list):
+    """Header fields → {SI column or 'run_id'/'protocol': (field index, unit)}; extras."""
+    found: dict = {}
+    extras: dict = {}
+    seen: dict = {}
+    for j, name in enumerate(fields):
+        if name == "":
+            continue
+        norm = normalize_header(name)
+        if norm in seen:
+            raise InputError(f"{path}: column '{name}' appears twice (also as '{fields[seen[norm]]}')")
+        seen[norm] = j
+        if norm in _TEXT_HEADERS:
+            key, unit, words = _TEXT_HEADERS[norm], None, _TEXT_HEADERS[norm]
+        elif norm in _HEADERS:
+            q, unit = _HEADERS[norm]
+            key, words = q.si, q.words
+        else:
+            extras[j] = name
+            continue
+        if key in found:
+            other = fields[found[key][0]]
+            raise InputError(f"{path}: columns '{other}' and '{name}' both give the {words}; keep one")
+        found[key] = (j, unit)
+    missing = [k for k in ("time_s", "run_id", "protocol", *_REQUIRED[1:]) if k not in found]
+    if missing:
+        key = missing[0]
+        if key in _BY_SI:
+            q = _BY_SI[key]
+            what = f"'{q.example}' ({q.words}, any unit suffix such as {q.hint})"
+            hints = [fields[j] for j in extras if _unit_hint(normalize_header(fields[j])) is q]
+            if hints:
+                what += f"; column '{hints[0]}' has no unit suffix that motorid knows"
+        else:
+            what = f"'{key}'"
+        names = [_BY_SI[k].example if k in _BY_SI else k for k in missing[1:]]
+        more = f" (and {len(names)} more: " + ", ".join(names) + ")" if names else ""
+        raise InputError(f"{path}: missing required column {what}{more}")
+    return found, extras
+
+
+def _parse_body(path: Path, body: str, delim: str, fields: list, found: dict, header_line: int):
+    """Body text → DataFrame of the mapped columns (floats, run_id/protocol as text)."""
+    text_cols = {found["run_id"][0], found["protocol"][0]}
+    numeric = {j for k, (j, _) in found.items() if k not in ("run_id", "protocol")}
+    names = list(range(len(fields)))
+    opts = dict(sep=delim, header=None, names=names, skip_blank_lines=False, skipinitialspace=True,
+                keep_default_na=False, index_col=False, engine="c")
+    try:
+        return pd.read_csv(io.StringIO(body), dtype={j: (float if j in numeric else str) for j in names},
+                           na_values={j: _NA_STRINGS for j in numeric}, **opts)
+    except ValueError as exc:
+        if isinstance(exc, pd.errors.ParserError):
+            msg = re.sub(r"line (\d+)", lambda m: f"line {int(m.group(1)) + header_line}", str(exc))
+            raise InputError(f"{path}: cannot parse as CSV ({msg.split('. ', 1)[-1].strip()})") from None
+    # some numeric column holds text: find the first such cell to name it
+    table = pd.read_csv(io.StringIO(body), dtype=str, na_filter=False, **opts)
+    for j in sorted(numeric):
+        cells = table[j].fillna("").astype(str).str.strip()
+        values = pd.to_numeric(cells.where(~cells.isin(_NA_STRINGS)), errors="coerce")
+        bad = np.flatnonzero(values.isna().to_numpy() & ~cells.isin(_NA_STRINGS).to_numpy())
+        if bad.size:
+            i = int(bad[0])
+            raise InputError(f"{path}: column '{fields[j]}', line {header_line + 1 + i}: "
+                             f"'{cells.iloc[i]}' is not a number")
+    raise InputError(f"{path}: cannot parse as CSV")  # pragma: no cover
+
+
+def _oil_viscosity(spec, temperature_C: np.ndarray) -> np.ndarray:
+    return np.asarray(spec.oil.viscosity(temperature_C), dtype=float)
+
+
+def read_log(path, spec=None) -> pd.DataFrame:
+    """Read and validate one bench log (``.csv`` or ``.csv.gz``) into the canonical SI frame.
+
+    path : the log file (gzip is recognised by its magic bytes too);
+    spec : :class:`motorid.spec.MotorSpec` whose ``oil`` gives the viscosity
+        [Pa·s] from ``oil_temp_C`` [°C] where the log has no viscosity column or
+        empty viscosity cells (and converts a kinematic viscosity column).
+
+    Returns a DataFrame with :data:`SI_COLUMNS` (time [s], θ [rad] wrapped to
+    [0, 2π), speed [rad/s], torque [N·m], pressures [Pa gauge], flows [m³/s],
+    oil temperature [°C], viscosity [Pa·s]), then ``file`` (the path as given),
+    ``run`` (= run_id) and the file's extra columns (kept, ignored).  Empty
+    sensor cells stay NaN; the row is kept.  Bad input raises
+    :class:`~motorid.errors.InputError` with a one-line message naming the file
+    and the column, line or run.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, not a log file")
+    fields, delim, body, header_line = _split_header(path, _read_text(path))
+    found, extras = _map_columns(path, fields)
+    table = _parse_body(path, body, delim, fields, found, header_line)
+    lines = header_line + 1 + np.arange(len(table))
+    empty_text = [table[found[k][0]].fillna("").astype(str).str.strip().eq("").to_numpy()
+                  for k in ("run_id", "protocol")]
+    blank = empty_text[0] & empty_text[1] & table[found["time_s"][0]].isna().to_numpy()
+    table, lines = table.loc[~blank].reset_index(drop=True), lines[~blank]
+    if table.empty:
+        raise InputError(f"{path}: no data rows after the header")
+
+    out = pd.DataFrame(index=table.index)
+    for key in ("run_id", "protocol"):
+        j = found[key][0]
+        cells = table[j].fillna("").astype(str).str.strip()
+        empty = np.flatnonzero((cells == "").to_numpy())
+        if empty.size:
+            raise InputError(f"{path}: column '{fields[j]}', line {lines[empty[0]]}: empty cell")
+        out[key] = cells
+    proto = out["protocol"].str.lower().str.replace(r"[\s\-]+", "_", regex=True)
+    unknown = np.flatnonzero(~proto.isin(PROTOCOLS).to_numpy())
+    if unknown.size:
+        i = unknown[0]
+        raise InputError(f"{path}: run '{out['run_id'].iloc[i]}', line {lines[i]}: unknown protocol "
+                         f"'{out['protocol'].iloc[i]}' (expected one of {', '.join(PROTOCOLS)})")
+    out["protocol"] = proto
+    per_run = out.groupby("run_id", sort=False)["protocol"].unique()
+    mixed = per_run[per_run.map(len) > 1]
+    if len(mixed):
+        raise InputError(f"{path}: run '{mixed.index[0]}' has several protocols: {', '.join(mixed.iloc[0])}")
+
+    kinematic = None
+    for si in FORMAT_COLUMNS:
+        if si not in found:
+            out[si] = np.nan
+            continue
+        j, unit = found[si]
+        x = table[j].to_numpy(dtype=float)
+        x = np.where(np.isinf(x), np.nan, x)  # an overflowed sensor reads as missing
+        conv = _BY_SI[si].units[unit]
+        if isinstance(conv, tuple):  # kinematic viscosity, needs the oil density
+            kinematic = (fields[j], x * conv[1])
+            x = np.full_like(x, np.nan)
+        elif callable(conv):
+            x = conv(x)
+        else:
+            x = x * conv
+        out[si] = x
+
+    col = lambda si: fields[found[si][0]]  # noqa: E731
+    t = out["time_s"].to_numpy()
+    if np.isnan(t).any():
+        i = int(np.flatnonzero(np.isnan(t))[0])
+        raise InputError(f"{path}: column '{col('time_s')}', line {lines[i]}: empty cell (time is required)")
+    codes = pd.factorize(out["run_id"])[0]
+    order = np.argsort(codes, kind="stable")
+    same = codes[order][1:] == codes[order][:-1]
+    bad = np.flatnonzero(same & (np.diff(t[order]) <= 0))
+    if bad.size:
+        rows = order[bad + 1]
+        k = int(np.argmin(rows))
+        i, prev = int(rows[k]), int(order[bad[k]])
+        raise InputError(f"{path}: run '{out['run_id'].iloc[i]}': time not strictly increasing at line "
+                         f"{lines[i]} ({col('time_s')} {table[found['time_s'][0]].iloc[i]:g} after "
+                         f"{table[found['time_s'][0]].iloc[prev]:g})")
+    temp = out["oil_temp_C"].to_numpy()
+    if np.any(temp < -273.15):
+        i = int(np.flatnonzero(temp < -273.15)[0])
+        raise InputError(f"{path}: column '{col('oil_temp_C')}', line {lines[i]}: "
+                         f"temperature below absolute zero")
+    two_pi = 2.0 * np.pi
+    theta = np.mod(out["theta_rad"].to_numpy(), two_pi)
+    out["theta_rad"] = np.where(theta >= two_pi, 0.0, theta)
+
+    mu = out["viscosity_Pa_s"].to_numpy()
+    if "viscosity_Pa_s" in found and kinematic is None and np.any(mu <= 0):
+        i = int(np.flatnonzero(mu <= 0)[0])
+        raise InputError(f"{path}: column '{col('viscosity_Pa_s')}', line {lines[i]}: viscosity must be > 0")
+    oil = getattr(spec, "oil", None)
+    if kinematic is not None:
+        name, nu = kinematic
+        if oil is None:
+            raise InputError(f"{path}: column '{name}' is a kinematic viscosity; a motor spec with an [oil] "
+                             f"table is needed for the density")
+        from motorid.physics.oil import density
+
+        mu = nu * np.asarray(density(temp, oil.density15_kg_m3, oil.expansion_per_K), dtype=float)
+    gaps = np.isnan(mu)
+    if gaps.any():
+        if oil is None:
+            if "viscosity_Pa_s" not in found:
+                raise InputError(f"{path}: no viscosity column (e.g. 'viscosity_mPas') and no [oil] in the "
+                                 f"motor spec to derive it from '{col('oil_temp_C')}'")
+        else:
+            mu = np.where(gaps, _oil_viscosity(spec, np.where(gaps, temp, 40.0)), mu)
+    out["viscosity_Pa_s"] = mu
+
+    out["file"] = str(path)
+    out["run"] = out["run_id"]
+    for j, name in extras.items():
+        key = name if name not in out.columns else f"extra:{name}"
+        out[key] = table[j].to_numpy()
+    return out
+
+
+def _log_paths(paths) -> list:
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    result = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.is_file() and
+                           (q.name.endswith(".csv") or q.name.endswith(".csv.gz")))
+            if not found:
+                raise InputError(f"{p}: directory holds no .csv or .csv.gz log")
+            result += found
+        else:
+            result.append(p)
+    if not result:
+        raise InputError("no log files given")
+    return result
+
+
+def read_logs(paths, spec=None) -> pd.DataFrame:
+    """Read a campaign: one or many logs (files, or directories of ``*.csv``/``*.csv.gz``).
+
+    Returns the frames of :func:`read_log` stacked; ``run`` is the run_id, or
+    ``"<file>:<run_id>"`` where the same run_id appears in several files
+    (``<file>`` is the file name, or the whole path where names repeat).
+    """
+    files = _log_paths(paths)
+    resolved: dict = {}
+    for p in files:
+        key = p.resolve()
+        if key in resolved:
+            raise InputError(f"{p}: log given twice (also as {resolved[key]})")
+        resolved[key] = p
+    frames = [read_log(p, spec) for p in files]
+    names = [p.name for p in files]
+    labels = names if len(set(names)) == len(names) else [str(p) for p in files]
+    owners: dict = {}
+    for k, f in enumerate(frames):
+        for rid in f["run_id"].unique():
+            owners.setdefault(rid, set()).add(k)
+    for k, f in enumerate(frames):
+        shared = f["run_id"].map(lambda r: len(owners[r]) > 1)
+        f["run"] = np.where(shared, labels[k] + ":" + f["run_id"], f["run_id"])
+    frame = pd.concat(frames, ignore_index=True, sort=False)
+    return frame

@@ -1,0 +1,1 @@
+"""Identification: data extraction from bench logs, least squares, posterior sampling."""

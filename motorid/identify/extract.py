@@ -1,0 +1,566 @@
+"""What the fit takes from a campaign: steady-state running samples and breakaway events.
+
+Running runs (ISO 4392-1 and -3: constant speed, pressure, flow or torque) give
+steady-state samples, with the start-up transient dropped.  Startability runs
+(ISO 4392-2) give one breakaway event each: the shaft angle and the port
+pressures at the instant the speed leaves rest, and the load torque held while
+the shaft was stuck (MODEL.md, "Static and kinetic friction").  The log does not
+mark the breakaway; it is found here from the speed alone, with the rest noise
+estimated from the log itself, so that logs of any sample rate, noise level,
+ramp rate or quantization serve.
+
+Every estimate here is robust (medians, MADs, sustained departures): an isolated
+sensor spike neither moves a breakaway nor ends a steady state.  Missing sensor
+cells stay NaN in the measured channels; the fit skips them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize_scalar, nnls
+from scipy.signal import savgol_filter
+
+from motorid.errors import InputError
+from motorid.logs import SI_COLUMNS
+from motorid.model import Samples, make_samples
+from motorid.spec import MotorSpec
+
+RUNNING_PROTOCOLS = ("constant_speed", "constant_pressure", "constant_flow", "constant_torque")
+STARTABILITY = "startability"
+MEASURED_CHANNELS = {"torque": "torque_Nm", "q_a": "q_a_m3_s", "q_b": "q_b_m3_s", "q_case": "q_case_m3_s"}
+FRAME_NUMERIC = [c for c in SI_COLUMNS if c not in ("run_id", "protocol")]
+_INPUTS = ("theta_rad", "speed_rad_s", "p_a_Pa", "p_b_Pa", "p_case_Pa", "viscosity_Pa_s")
+
+# keys of Dataset.excluded
+MISSING_INPUT = "samples with a missing input channel"
+START_TRANSIENT = "start-transient samples"
+UNSTEADY = "unsteady samples after the start"
+NO_STEADY_SPEED = "samples with no steady speed"
+SHORT_RUN = "runs with too few samples"
+FEW_STEADY = "runs with too few steady samples"
+NO_BREAKAWAY = "startability runs without a breakaway"
+NO_HELD_TORQUE = "breakaway events without a torque reading"
+
+_MAD = 1.4826  # MAD → standard deviation of a normal distribution
+
+
+@dataclass(frozen=True)
+class ExtractSettings:
+    """Tolerances of the extraction (none is tuned to one simulator).
+
+    rest_speed : a run whose median |speed| is below this has no steady speed, and
+        a startability run must depart from rest by at least this much (and by ten
+        rest-noise deviations) to count as broken away [rad/s]
+    min_samples : fewest samples a run needs [-]
+    min_steady : fewest steady samples a running run needs [-]
+    band_sigmas : half-width of the steady band in robust deviations of the
+        settled signal (ripple and noise) [-]
+    rel_tol : smallest half-width of the steady band, relative to the settled level [-]
+    speed_floor : smallest half-width of the speed band [rad/s]
+    pressure_floor : smallest half-width of the pressure bands [Pa]
+    accel_window : Savitzky-Golay window of the acceleration [samples]
+    """
+
+    rest_speed: float = 2e-3
+    min_samples: int = 10
+    min_steady: int = 3
+    band_sigmas: float = 4.0
+    rel_tol: float = 0.02
+    speed_floor: float = 1e-3
+    pressure_floor: float = 5e3
+    accel_window: int = 9
+
+
+@dataclass
+class Dataset:
+    """The samples and events a fit uses, with what was left out and why.
+
+    running : :class:`~motorid.model.Samples` of the steady-state samples of the
+        running runs (direction = sign of the run's median speed; acceleration
+        from a smoothed derivative of speed within the run)
+    measured : channel → array aligned with ``running``: "torque" [N·m], "q_a",
+        "q_b", "q_case" [m³/s]; NaN where the sensor had no reading
+    run_of_sample : index of each running sample's run into ``runs`` [-]
+    frame_index : row of each running sample in the frame given to :func:`extract`
+    runs : one row per run: run, protocol, file, n_samples, n_steady,
+        speed_median_rad_s, dp_median_Pa (P_A − P_B), psum_median_Pa (P_A + P_B),
+        temp_median_C, direction (±1, 0 where none), onset_time_s (startability),
+        excluded (why the run gives nothing, "" where it does)
+    events : :class:`~motorid.model.Samples` at the breakaway instants (θ, P_A,
+        P_B, P_c, μ at the onset; speed 0; direction = the way the shaft broke away)
+    held_torque : load torque held in the stuck phase of each event [N·m]
+    event_runs : run key of each event; run_of_event : its index into ``runs``
+    onset_time : breakaway instant of each event, run time [s]
+    excluded : reason → count (samples or runs, as the reason says)
+    notes : one line per run that gave less than it might, in words
+    """
+
+    running: Samples
+    measured: dict
+    run_of_sample: np.ndarray
+    frame_index: np.ndarray
+    runs: pd.DataFrame
+    events: Samples
+    held_torque: np.ndarray
+    event_runs: list
+    run_of_event: np.ndarray
+    onset_time: np.ndarray
+    excluded: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+    @property
+    def n_running(self) -> int:
+        return int(np.asarray(self.running.theta).shape[0])
+
+    @property
+    def n_events(self) -> int:
+        return len(self.event_runs)
+
+
+# ----------------------------------------------------------------- small robust tools
+
+
+def _odd(k: int) -> int:
+    return k if k % 2 == 1 else k - 1
+
+
+def _robust_poly(x: np.ndarray, y: np.ndarray, degree: int, k: float = 3.5, iterations: int = 6):
+    """Polynomial fit of y(x), readings beyond k robust deviations dropped → (coef, σ of the rest)."""
+
+    def outside(r, sel):
+        centre = np.median(r[sel])
+        sigma = _MAD * np.median(np.abs(r[sel] - centre))
+        return np.abs(r - centre) > max(k * sigma, 1e-300), sigma
+
+    far, _ = outside(y, np.ones(x.size, bool))
+    keep = ~far
+    for _ in range(iterations):
+        if degree > 0 and keep.sum() > degree + 2 and np.ptp(x[keep]) > 0:
+            coef = np.polyfit(x[keep], y[keep], degree)
+        else:
+            coef = np.array([np.median(y[keep])])
+        far, sigma = outside(y - np.polyval(coef, x), keep)
+        if (~far).sum() < degree + 3 or np.array_equal(~far, keep):
+            break
+        keep = ~far
+    return coef, float(sigma)
+
+
+def _sustained(x: np.ndarray, length: int) -> np.ndarray:
+    """Forward running minimum min(x[i:i+length]): a level x stays above for ``length`` samples."""
+    out = x.copy()
+    for j in range(1, length):
+        out[:-j] = np.minimum(out[:-j], x[j:])
+    return out
+
+
+def _median3(x: np.ndarray) -> np.ndarray:
+    """Running median of three: removes isolated spikes, leaves monotone runs and corners as they are."""
+    if x.size < 3:
+        return x.copy()
+    out = x.copy()
+    out[1:-1] = np.median(np.stack([x[:-2], x[1:-1], x[2:]]), axis=0)
+    return out
+
+
+def _circular_mean(theta: np.ndarray) -> float:
+    return float(np.mod(np.angle(np.mean(np.exp(1j * theta))), 2.0 * np.pi))
+
+
+# ----------------------------------------------------------------- steady state
+
+
+def steady_state_mask(speed, dp, psum, settings: ExtractSettings = ExtractSettings()):
+    """Steady-state samples of one running run → (steady, start_transient) boolean masks.
+
+    speed [rad/s], dp = P_A − P_B [Pa], psum = P_A + P_B [Pa], in time order (NaN
+    allowed).  Each channel is smoothed by a short moving median (isolated spikes
+    vanish); its settled level is the median of the smoothed second half of the
+    run, and the band around it is ``band_sigmas`` robust deviations of that half
+    (so shaft-angle ripple at low speed stays inside), at least ``rel_tol`` of the
+    level and the floors.  The start transient ends where every channel has
+    stayed in its band for a sustained stretch; later samples out of band are
+    unsteady.
+    """
+    speed, dp, psum = (np.asarray(a, dtype=float) for a in (speed, dp, psum))
+    n = speed.size
+    window = max(1, _odd(min(int(np.clip(n // 100, 5, 21)), n)))
+    in_band = np.ones(n, bool)
+    for x, floor in ((speed, settings.speed_floor), (dp, settings.pressure_floor),
+                     (psum, settings.pressure_floor)):
+        if not np.isfinite(x).any():
+            continue
+        smooth = pd.Series(x).rolling(window, center=True, min_periods=1).median().to_numpy()
+        tail = smooth[n // 2:]
+        if not np.isfinite(tail).any():
+            continue
+        level = np.nanmedian(tail)
+        spread = _MAD * np.nanmedian(np.abs(tail - level))
+        tol = max(settings.band_sigmas * spread, settings.rel_tol * abs(level), floor)
+        in_band &= ~(np.abs(smooth - level) > tol)  # NaN counts as in band
+    hold = int(np.clip(n // 20, 3, 50))
+    bad = np.concatenate([[0], np.cumsum(~in_band)])
+    k = np.arange(n)
+    settled = bad[np.minimum(k + hold, n)] - bad[k] == 0
+    start = int(np.argmax(settled)) if settled.any() else n
+    transient = k < start
+    return in_band & ~transient, transient
+
+
+def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
+    """dω/dt of one run by a Savitzky-Golay derivative (quadratic) [rad/s²].
+
+    time [s], speed [rad/s] (NaN gaps are bridged).  Uneven sampling: the speed is
+    smoothed the same way and differentiated against time.  Zero where the run
+    is too short to tell.
+    """
+    t = np.asarray(time, dtype=float)
+    w = np.asarray(speed, dtype=float)
+    n = t.size
+    ok = np.isfinite(w)
+    if n < 5 or ok.sum() < 5:
+        return np.zeros(n)
+    if not ok.all():
+        w = np.interp(t, t[ok], w[ok])
+    win = _odd(min(max(window, 5), n))
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    if dt.max() <= 1.5 * step and dt.min() >= step / 1.5:
+        return savgol_filter(w, win, 2, deriv=1, delta=step)
+    return np.gradient(savgol_filter(w, win, 2), t)
+
+
+# ----------------------------------------------------------------- breakaway
+
+
+class NoBreakaway(ValueError):
+    """No breakaway in a startability run; the message says why, in words."""
+
+
+@dataclass(frozen=True)
+class Breakaway:
+    """Where the speed of a startability run leaves rest.
+
+    onset_time [s]; direction ±1, the way the shaft breaks away; last_rest: index
+    (into the arrays given) of the last sample still within the rest noise;
+    rest_level [rad/s] and noise [rad/s]: the stuck speed's level and robust
+    deviation (at least half a quantization step).
+    """
+
+    onset_time: float
+    direction: float
+    last_rest: int
+    rest_level: float
+    noise: float
+
+
+def _rest_level(t, w, line: bool, floor: float):
+    """Rest speed of the stuck samples → (baseline function, noise σ [rad/s]).
+
+    σ is the largest of: the MAD of the residuals, the standard deviation of their
+    central 80 % (scaled to a normal σ; it does not collapse to zero when most
+    quantized readings sit on one level), half the quantization step between the
+    levels the readings keep returning to (rare off-level readings are spikes),
+    and ``floor``.
+    """
+    t_ref = t[-1]
+    coef, sigma = _robust_poly(t - t_ref, w, 1 if line else 0)
+    r = w - np.polyval(coef, t - t_ref)
+    lo, hi = np.percentile(r, [10.0, 90.0])
+    central = r[(r >= lo) & (r <= hi)]
+    trimmed = 1.51 * float(central.std()) if central.size >= 5 else 0.0
+    levels, counts = np.unique(w, return_counts=True)
+    frequent = levels[counts >= max(3, 0.05 * w.size)]
+    quantum = float(np.diff(frequent).min()) if frequent.size >= 2 else 0.0
+    return (lambda tt: np.polyval(coef, tt - t_ref)), max(sigma, trimmed, 0.5 * quantum, floor)
+
+
+def _hinge_onset(t, dev, lo: int, last_rest: int, hi: int) -> float:
+    """Onset t0 by fitting dev = a·u + b·u², u = max(t − t0, 0), a, b ≥ 0, over samples lo..hi.
+
+    Rest before t0; after it, growth from zero at a rate that does not fall (the
+    pressure keeps rising): linear when the static friction exceeds the kinetic
+    one, quadratic when they are equal.
+    """
+    tt, yy = t[lo:hi + 1], dev[lo:hi + 1]
+
+    def sse(t0):
+        u = np.clip(tt - t0, 0.0, None)
+        return float(nnls(np.column_stack([u, u * u]), yy)[1] ** 2)
+
+    lo_t, hi_t = t[lo], t[last_rest + 1]
+    grid = np.linspace(lo_t, hi_t, 81)
+    costs = np.array([sse(g) for g in grid])
+    k = int(np.argmin(costs))
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    if b > a:
+        res = minimize_scalar(sse, bounds=(a, b), method="bounded", options={"xatol": 1e-6 * (b - a)})
+        if res.fun <= costs[k]:
+            return float(res.x)
+    return float(grid[k])
+
+
+def find_breakaway(time, speed, rest_speed: float = 2e-3) -> Breakaway:
+    """Find the instant a startability run's speed leaves rest.
+
+    time [s], speed [rad/s] of one run (NaN speeds are skipped).  The rest level
+    and noise come from the early stuck phase (robust median/MAD, then a robust
+    line over the whole stuck phase, so slight creep is absorbed); the first
+    departure sustained over three samples by more than max(10 σ, rest_speed)
+    marks motion; walking back gives the last sample within 3 σ of rest, and the
+    onset is refined by fitting the initial growth of speed, zero before t0 and
+    a(t − t0) + b(t − t0)² after, over the rest samples and the first growth
+    samples.  Raises :class:`NoBreakaway` with the reason when there is none.
+    """
+    t_all = np.asarray(time, dtype=float)
+    w_all = np.asarray(speed, dtype=float)
+    ok = np.flatnonzero(np.isfinite(t_all) & np.isfinite(w_all))
+    t, w = t_all[ok], w_all[ok]
+    n = t.size
+    if n < 8:
+        raise NoBreakaway(f"only {n} samples with a speed reading")
+    floor = 1e-12 * (1.0 + np.abs(w).max())
+    stuck_end, line, last = min(max(20, n // 10), n // 2), False, None
+    for _ in range(5):
+        base, noise = _rest_level(t[:stuck_end], w[:stuck_end], line, floor)
+        r = w - base(t)
+        up, down = _sustained(r, 3), _sustained(-r, 3)
+        direction = 1.0 if up.max() >= down.max() else -1.0
+        lasting = up if direction > 0 else down
+        dev = direction * r
+        moving = max(10.0 * noise, rest_speed)
+        if lasting.max() < moving:
+            raise NoBreakaway(f"speed never left rest (largest sustained departure {lasting.max():.3g} rad/s, "
+                              f"rest noise {noise:.3g} rad/s)")
+        first_moving = int(np.argmax(lasting >= moving))
+        at_rest = np.flatnonzero(np.abs(r[:first_moving + 1]) <= max(3.0 * noise, 0.1 * moving))
+        if first_moving < 3 or at_rest.size == 0:
+            raise NoBreakaway("the shaft is already turning at the start of the run")
+        last_rest = int(at_rest[-1])
+        if last_rest == last:
+            break
+        last = last_rest
+        stuck_end = max(8, int(0.9 * (last_rest + 1)))
+        line = stuck_end >= 20
+    # the initial growth: up to 30 σ (at least 6 samples), never past half the peak
+    peak = lasting.max()
+    grow = last_rest + 1
+    high = np.flatnonzero(dev[grow:] >= max(30.0 * noise, moving))
+    end = max(grow + int(high[0]) if high.size else n - 1, grow + 5)
+    half = np.flatnonzero(dev[grow:] >= 0.5 * peak)
+    if half.size:
+        end = min(end, grow + int(half[0]))
+    end = min(end, grow + 20000, n - 1)
+    if end - last_rest < 2:  # one sample of growth: the onset lies between it and the last at rest
+        onset = 0.5 * float(t[last_rest] + t[min(grow, n - 1)])
+    else:
+        lo = max(0, last_rest + 1 - max(5, end - last_rest))
+        onset = _hinge_onset(t, _median3(dev), lo, last_rest, end)
+    return Breakaway(onset, direction, int(ok[last_rest]), float(base(np.array([onset]))[0]), noise)
+
+
+def value_at_onset(time, values, onset_time: float, count: int) -> float:
+    """A slowly ramped channel at the onset: robust line through its last ``count``
+    readings before the onset, evaluated there [unit of values]."""
+    t = np.asarray(time, dtype=float)
+    x = np.asarray(values, dtype=float)
+    sel = np.flatnonzero((t < onset_time) & np.isfinite(x))[-count:]
+    if sel.size == 0:
+        return math.nan
+    if sel.size < 4:
+        return float(x[sel[-1]])
+    coef, _ = _robust_poly(t[sel] - onset_time, x[sel], 1)
+    return float(np.polyval(coef, 0.0))
+
+
+# ----------------------------------------------------------------- the extraction
+
+
+def _check_frame(frame: pd.DataFrame) -> None:
+    missing = [c for c in SI_COLUMNS if c not in frame.columns]
+    if missing:
+        raise InputError(f"log frame: missing column(s) {', '.join(missing)} (read logs with motorid.logs.read_logs)")
+
+
+def _check_spec(spec) -> None:
+    if not isinstance(spec, MotorSpec):
+        raise InputError(f"motor spec: expected a MotorSpec, got {type(spec).__name__}")
+    if not (isinstance(spec.pistons, (int, np.integer)) and spec.pistons >= 2):
+        raise InputError(f"motor spec '{spec.name}': pistons must be an integer >= 2, got {spec.pistons!r}")
+    if not (math.isfinite(spec.displacement) and spec.displacement > 0):
+        raise InputError(f"motor spec '{spec.name}': displacement must be > 0, got {spec.displacement!r}")
+
+
+def _median(x) -> float:
+    x = np.asarray(x, dtype=float)
+    return float(np.nanmedian(x)) if np.isfinite(x).any() else math.nan
+
+
+def _running_run(key, cols, settings, excluded, notes):
+    """Steady samples of one running run → (positions, acceleration, direction, n_steady)."""
+    n = cols["time_s"].size
+    if n < settings.min_samples:
+        excluded[SHORT_RUN] = excluded.get(SHORT_RUN, 0) + 1
+        notes.append(f"run {key}: only {n} samples (at least {settings.min_samples} needed)")
+        return None, 0.0, "too few samples"
+    valid = np.all([np.isfinite(cols[c]) for c in _INPUTS], axis=0)
+    excluded[MISSING_INPUT] = excluded.get(MISSING_INPUT, 0) + int((~valid).sum())
+    speed = cols["speed_rad_s"]
+    median_speed = _median(speed[valid])
+    if not valid.any() or not abs(median_speed) >= settings.rest_speed:
+        excluded[NO_STEADY_SPEED] = excluded.get(NO_STEADY_SPEED, 0) + int(valid.sum())
+        notes.append(f"run {key}: no steady speed (median {median_speed:.3g} rad/s, "
+                     f"below {settings.rest_speed:g} rad/s)")
+        return None, 0.0, "no steady speed"
+    direction = float(np.sign(median_speed))
+    p_a, p_b = cols["p_a_Pa"], cols["p_b_Pa"]
+    idx = np.flatnonzero(valid)
+    steady, transient = steady_state_mask(speed[idx], (p_a - p_b)[idx], (p_a + p_b)[idx], settings)
+    window = max(1, _odd(min(int(np.clip(idx.size // 100, 5, 21)), idx.size)))
+    smooth = pd.Series(speed[idx]).rolling(window, center=True, min_periods=1).median().to_numpy()
+    stopped = direction * smooth < min(settings.rest_speed, 0.5 * abs(median_speed))
+    excluded[START_TRANSIENT] = excluded.get(START_TRANSIENT, 0) + int(transient.sum())
+    excluded[NO_STEADY_SPEED] = excluded.get(NO_STEADY_SPEED, 0) + int((stopped & ~transient).sum())
+    excluded[UNSTEADY] = excluded.get(UNSTEADY, 0) + int((~steady & ~transient & ~stopped).sum())
+    steady &= ~stopped
+    if steady.sum() < settings.min_steady:
+        excluded[FEW_STEADY] = excluded.get(FEW_STEADY, 0) + 1
+        notes.append(f"run {key}: only {int(steady.sum())} steady samples of {n}")
+        return None, direction, "too few steady samples"
+    return idx[steady], direction, ""
+
+
+def _startability_run(key, cols, settings, excluded, notes):
+    """Breakaway event of one startability run → dict of the event, or None."""
+    t = cols["time_s"]
+    if t.size < settings.min_samples:
+        excluded[SHORT_RUN] = excluded.get(SHORT_RUN, 0) + 1
+        excluded[NO_BREAKAWAY] = excluded.get(NO_BREAKAWAY, 0) + 1
+        notes.append(f"run {key}: only {t.size} samples (at least {settings.min_samples} needed)")
+        return None, "too few samples"
+    try:
+        b = find_breakaway(t, cols["speed_rad_s"], settings.rest_speed)
+    except NoBreakaway as exc:
+        excluded[NO_BREAKAWAY] = excluded.get(NO_BREAKAWAY, 0) + 1
+        notes.append(f"run {key}: no breakaway found, {exc}")
+        return None, "no breakaway found"
+    stuck = np.flatnonzero(t < b.onset_time)
+    count = int(np.clip(stuck.size // 4, 8, 50))
+    window = stuck[-count:]
+    event = {"onset": b.onset_time, "direction": b.direction}
+    for c in ("p_a_Pa", "p_b_Pa", "p_case_Pa"):
+        event[c] = value_at_onset(t, cols[c], b.onset_time, count)
+    theta = cols["theta_rad"][window]
+    theta = theta[np.isfinite(theta)]
+    event["theta_rad"] = _circular_mean(theta) if theta.size else math.nan
+    event["viscosity_Pa_s"] = _median(cols["viscosity_Pa_s"][window])
+    event["oil_temp_C"] = _median(cols["oil_temp_C"][window])
+    # held load torque: median over the last half of the stuck phase
+    torque = cols["torque_Nm"]
+    late = stuck[t[stuck] >= t[0] + 0.5 * (b.onset_time - t[0])]
+    if np.isfinite(torque[late]).sum() < 3:
+        late = stuck
+    event["held"] = _median(torque[late])
+    if not math.isfinite(event["held"]):
+        excluded[NO_HELD_TORQUE] = excluded.get(NO_HELD_TORQUE, 0) + 1
+        notes.append(f"run {key}: breakaway at t = {b.onset_time:.4g} s but no torque reading while stuck")
+    dp = event["p_a_Pa"] - event["p_b_Pa"]
+    if math.isfinite(dp) and dp * b.direction < 0:
+        notes.append(f"run {key}: the shaft broke away against P_A − P_B ({dp:.4g} Pa)")
+    missing = [c for c in ("theta_rad", "p_a_Pa", "p_b_Pa", "p_case_Pa", "viscosity_Pa_s")
+               if not math.isfinite(event[c])]
+    if missing:
+        excluded[NO_BREAKAWAY] = excluded.get(NO_BREAKAWAY, 0) + 1
+        notes.append(f"run {key}: breakaway at t = {b.onset_time:.4g} s but no reading of "
+                     f"{', '.join(missing)} before it")
+        return None, "no input readings at the breakaway"
+    return event, ""
+
+
+def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | None = None) -> Dataset:
+    """Steady-state running samples and breakaway events of a campaign.
+
+    frame : canonical SI frame of :func:`motorid.logs.read_logs` (its ``run``
+        column, else ``run_id``, names the runs); spec : the motor (pistons for
+        S(θ)); settings : tolerances, :class:`ExtractSettings` by default.
+    """
+    settings = settings or ExtractSettings()
+    _check_frame(frame)
+    _check_spec(spec)
+    keys = (frame["run"] if "run" in frame.columns else frame["run_id"]).astype(str).to_numpy()
+    codes, uniques = pd.factorize(keys)
+    order = np.lexsort((frame["time_s"].to_numpy(dtype=float), codes))
+    bounds = np.searchsorted(codes[order], np.arange(len(uniques) + 1))
+    numeric = {c: frame[c].to_numpy(dtype=float) for c in FRAME_NUMERIC}
+    protocols = frame["protocol"].astype(str).to_numpy()
+    files = frame["file"].astype(str).to_numpy() if "file" in frame.columns else np.full(len(frame), "")
+    all_temp = _median(numeric["oil_temp_C"])
+
+    excluded: dict = {}
+    notes: list = []
+    rows, picks, accel, run_of_sample, directions, events = [], [], [], [], [], []
+    for r, key in enumerate(uniques):
+        pos = order[bounds[r]:bounds[r + 1]]
+        cols = {c: v[pos] for c, v in numeric.items()}
+        protocol = protocols[pos[0]]
+        row = {"run": key, "protocol": protocol, "file": files[pos[0]], "n_samples": pos.size, "n_steady": 0,
+               "direction": 0.0, "onset_time_s": math.nan, "excluded": ""}
+        used = np.arange(pos.size)
+        if protocol == STARTABILITY:
+            event, why = _startability_run(key, cols, settings, excluded, notes)
+            row["excluded"] = why
+            if event is not None:
+                event["run"], event["run_index"] = key, r
+                events.append(event)
+                row.update(direction=event["direction"], onset_time_s=event["onset"])
+        elif protocol in RUNNING_PROTOCOLS:
+            chosen, direction, why = _running_run(key, cols, settings, excluded, notes)
+            row.update(direction=direction, excluded=why)
+            if chosen is not None:
+                used = chosen
+                acc = smoothed_acceleration(cols["time_s"], cols["speed_rad_s"], settings.accel_window)
+                picks.append(pos[chosen])
+                accel.append(acc[chosen])
+                run_of_sample.append(np.full(chosen.size, r))
+                directions.append(np.full(chosen.size, direction))
+                row["n_steady"] = int(chosen.size)
+        else:
+            raise InputError(f"run {key}: unknown protocol '{protocol}'")
+        p_a, p_b = cols["p_a_Pa"][used], cols["p_b_Pa"][used]
+        row.update(speed_median_rad_s=_median(cols["speed_rad_s"][used]), dp_median_Pa=_median(p_a - p_b),
+                   psum_median_Pa=_median(p_a + p_b), temp_median_C=_median(cols["oil_temp_C"][used]))
+        rows.append(row)
+
+    runs = pd.DataFrame(rows, columns=["run", "protocol", "file", "n_samples", "n_steady",
+                                       "speed_median_rad_s", "dp_median_Pa", "psum_median_Pa",
+                                       "temp_median_C", "direction", "onset_time_s", "excluded"])
+    join = lambda parts, dtype=float: (np.concatenate(parts).astype(dtype) if parts  # noqa: E731
+                                       else np.zeros(0, dtype=dtype))
+    index = join(picks, int)
+    run_of_sample_arr = join(run_of_sample, int)
+    temperature = numeric["oil_temp_C"][index]
+    run_temp = runs["temp_median_C"].to_numpy(dtype=float)[run_of_sample_arr]
+    temperature = np.where(np.isfinite(temperature), temperature,
+                           np.where(np.isfinite(run_temp), run_temp, all_temp if math.isfinite(all_temp) else 40.0))
+    running = make_samples(spec, numeric["theta_rad"][index], numeric["speed_rad_s"][index],
+                           numeric["p_a_Pa"][index], numeric["p_b_Pa"][index], numeric["p_case_Pa"][index],
+                           numeric["viscosity_Pa_s"][index], acceleration=join(accel),
+                           direction=join(directions), temperature=temperature, time=numeric["time_s"][index])
+    measured = {name: numeric[col][index] for name, col in MEASURED_CHANNELS.items()}
+
+    ev = lambda c: np.array([e[c] for e in events], dtype=float)  # noqa: E731
+    ev_temp = ev("oil_temp_C")
+    event_samples = make_samples(spec, ev("theta_rad"), np.zeros(len(events)), ev("p_a_Pa"), ev("p_b_Pa"),
+                                 ev("p_case_Pa"), ev("viscosity_Pa_s"), acceleration=np.zeros(len(events)),
+                                 direction=ev("direction"),
+                                 temperature=np.where(np.isfinite(ev_temp), ev_temp, 40.0), time=ev("onset"))
+    return Dataset(
+        running=running, measured=measured, run_of_sample=run_of_sample_arr, frame_index=index, runs=runs,
+        events=event_samples, held_torque=ev("held"), event_runs=[e["run"] for e in events],
+        run_of_event=np.array([e["run_index"] for e in events], dtype=int), onset_time=ev("onset"),
+        excluded=excluded, notes=notes)
+

@@ -1,0 +1,566 @@
+"""Least-squares identification with optimistix (Levenberg-Marquardt).
+
+All channels are fitted jointly — running torque, breakaway torque, port A and
+B flows, case flow — each residual divided by a noise level estimated from the
+data (per channel and run).  The Jacobian comes from JAX.  Isolated spikes are
+rejected (|r| > ``outlier_sigma`` σ) and counted; the noise levels and the
+outlier set are re-estimated until they settle.
+
+Parameters the logs cannot determine are found twice over: by rules that say
+which data each parameter needs (:func:`coverage_reasons`) and by the null
+space of the weighted Jacobian.  They are held fixed and reported as not
+identifiable, never given a number.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple, Sequence
+
+import equinox as eqx
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from motorid import model
+from motorid.model import Samples
+
+RUNNING_CHANNELS = ("torque", "q_a", "q_b", "q_case")
+CHANNELS = RUNNING_CHANNELS + ("breakaway",)
+CHANNEL_UNITS = {"torque": "N·m", "q_a": "m³/s", "q_b": "m³/s", "q_case": "m³/s", "breakaway": "N·m"}
+
+
+@dataclass
+class FitOptions:
+    """Settings of the least-squares fit (what to change when a fit fails)."""
+
+    harmonics: int | None = None  # order M of K_L(θ); default: the spec's
+    outlier_sigma: float = 5.0  # reject residuals beyond this many σ
+    rounds: int = 4  # noise/outlier re-estimation rounds
+    rtol: float = 1e-10
+    atol: float = 1e-10
+    max_steps: int = 200
+    null_space_tol: float = 1e-7  # relative singular value below which a direction is unidentified
+    fixed: dict = field(default_factory=dict)  # parameters held at given values
+    bins_per_pitch: int = 192  # shaft-angle cells per piston pitch (data reduction)
+
+
+@dataclass
+class FitResult:
+    """What a least-squares fit found; SI units throughout."""
+
+    names: list  # every parameter of the model (fitted or not)
+    free: list  # the fitted ones
+    values: dict  # name -> value (None where not identifiable)
+    std: dict  # name -> standard error (None where not identifiable)
+    covariance: np.ndarray  # over `free`
+    correlation: np.ndarray
+    identifiable: dict  # name -> bool
+    reasons: dict  # name -> words, for the not identifiable ones
+    noise: dict  # channel -> pooled σ [SI]
+    noise_by_run: dict  # channel -> array over runs (NaN where no data)
+    outliers: dict  # channel -> count of rejected samples
+    used: dict  # channel -> count of residuals used
+    chi2: float
+    dof: int
+    steps: int
+    converged: bool
+    warnings: list
+    residuals: dict  # channel -> array (measured − model; NaN where missing), aligned with the data
+    sigma: dict  # channel -> per-sample σ used in the final round
+    inliers: dict  # channel -> bool mask of samples used
+    params_all: dict  # every parameter incl. held ones (for predictions)
+    mechanisms: tuple = ()
+    problem: object = None  # the reduced problem (cells, noise, inliers) for the sampler
+
+    @property
+    def reduced_chi2(self) -> float:
+        return self.chi2 / max(self.dof, 1)
+
+
+# ----------------------------------------------------------------------------
+# data coverage: what each parameter needs
+
+
+def _spread(x) -> float:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size < 2:
+        return 0.0
+    lo, hi = np.percentile(x, [2, 98])
+    return float((hi - lo) / max(np.max(np.abs(x)), 1e-300))
+
+
+def _has(arr) -> np.ndarray:
+    return np.isfinite(np.asarray(arr, dtype=float))
+
+
+def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
+    """Reasons why the logs cannot identify a parameter, from what data exist.
+
+    Returns name -> reason for parameters that lack the data they need
+    (MODEL.md, "What the bench can identify").
+    """
+    reasons = {}
+    s = data.running
+    m = data.measured
+    n_run = 0 if s is None else int(np.asarray(s.theta).size)
+    tq = _has(m["torque"]) if n_run else np.zeros(0, bool)
+    psum = np.asarray(s.p_a + s.p_b) if n_run else np.zeros(0)
+    if tq.sum() < 3:
+        for k in ("Kv", "KF", "TFc"):
+            reasons[k] = "no running-torque samples in these logs"
+    else:
+        mu_w = np.asarray(s.viscosity * s.speed)[tq]
+        if _spread(np.abs(mu_w)) < 0.05:
+            reasons["Kv"] = "running torque at a single speed·viscosity level: viscous and Coulomb friction cannot be told apart"
+        if _spread(psum[tq]) < 0.05:
+            msg = "running torque at a single port-pressure sum P_A+P_B: K_F and T_Fc cannot be told apart"
+            reasons["KF"] = msg
+            reasons["TFc"] = msg
+    n_ev = 0 if data.events is None else int(np.asarray(data.held_torque).size)
+    good_ev = _has(data.held_torque) if n_ev else np.zeros(0, bool)
+    if good_ev.sum() == 0:
+        for k in ("KFS", "Ks"):
+            reasons[k] = "no startability breakaway found in these logs (ISO 4392-2 runs needed)"
+    elif good_ev.sum() < 3 or _spread(np.asarray(data.events.p_a + data.events.p_b)[good_ev]) < 0.05:
+        msg = "breakaway at a single port-pressure level: K_FS and K_s cannot be told apart"
+        reasons["KFS"] = msg
+        reasons["Ks"] = msg
+    for k in ("KFS", "Ks"):
+        if k not in reasons and ("KF" in reasons or "TFc" in reasons):
+            reasons[k] = "static friction is measured relative to K_F and T_Fc, which these logs do not determine"
+    flows = {c: _has(m[c]) if n_run else np.zeros(0, bool) for c in ("q_a", "q_b", "q_case")}
+    case_info = flows["q_case"] | (flows["q_a"] & flows["q_b"])
+    if case_info.sum() < 3:
+        reasons["KL0"] = "no case-drain flow (nor both port flows) in these logs"
+    else:
+        pitch = 2 * np.pi / spec.pistons
+        phase = np.mod(np.asarray(s.theta)[case_info], pitch) / pitch
+        bins = np.unique(np.floor(phase * 12).astype(int))
+        for name in names:
+            if name.startswith("KL_") and len(bins) < 8:
+                reasons[name] = "case-drain flow not seen over a whole piston pitch of shaft angle (a slow constant-speed run is needed)"
+    port = flows["q_a"] | flows["q_b"]
+    if port.sum() < 3:
+        reasons["KAB"] = "no port flow in these logs"
+    elif np.all(np.abs(np.asarray(s.p_a - s.p_b)[port]) < 1e3):
+        reasons["KAB"] = "port flows only at zero pressure difference"
+    if "KL0" in reasons:
+        for name in names:
+            if name.startswith("KL_"):
+                reasons.setdefault(name, reasons["KL0"])
+    return {k: v for k, v in reasons.items() if k in names}
+
+
+# ----------------------------------------------------------------------------
+# noise
+
+
+def _robust_std(x) -> float:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size < 2:
+        return np.nan
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def _initial_noise(values, run_of_sample, n_runs) -> np.ndarray:
+    """σ per run from first differences within the run (model-free start)."""
+    out = np.full(n_runs, np.nan)
+    for r in range(n_runs):
+        v = values[run_of_sample == r]
+        v = v[np.isfinite(v)]
+        if v.size >= 3:
+            out[r] = _robust_std(np.diff(v)) / np.sqrt(2.0)
+    return out
+
+
+def _residual_noise(res, run_of_sample, n_runs) -> np.ndarray:
+    out = np.full(n_runs, np.nan)
+    for r in range(n_runs):
+        v = res[run_of_sample == r]
+        v = v[np.isfinite(v)]
+        if v.size >= 5:
+            out[r] = _robust_std(v)
+    return out
+
+
+def _floor_noise(sig_runs: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    """Fill runs with no estimate by the median, and keep σ above round-off."""
+    finite = sig_runs[np.isfinite(sig_runs) & (sig_runs > 0)]
+    pooled = float(np.median(finite)) if finite.size else np.nan
+    scale = np.nanmax(np.abs(measured)) if np.any(np.isfinite(measured)) else 1.0
+    floor = max(1e-9 * scale, 1e-300)
+    if not np.isfinite(pooled):
+        pooled = floor
+    out = np.where(np.isfinite(sig_runs) & (sig_runs > 0), sig_runs, pooled)
+    # a run's σ may not fall below a tenth of the pooled level (a short run's MAD is noisy)
+    return np.maximum(out, max(0.1 * pooled, floor))
+
+
+# ----------------------------------------------------------------------------
+# the fit
+
+
+class _Ctx(NamedTuple):
+    """Everything the residual needs; arrays are traced, the rest is static."""
+
+    spec: object
+    mechanisms: tuple
+    free: tuple
+    positive: tuple
+    scales: jax.Array
+    held: dict
+    running: object
+    events: object
+    observed: dict
+    weights: dict
+
+
+def _params(values: dict, ctx: _Ctx) -> dict:
+    p = dict(ctx.held)
+    p.update(values)
+    return p
+
+
+def _predictions(values: dict, ctx: _Ctx) -> dict:
+    p = _params(values, ctx)
+    out = {}
+    if ctx.running is not None:
+        ch = model.predict(p, ctx.spec, ctx.running, ctx.mechanisms)
+        out.update(torque=ch.torque, q_a=ch.q_a, q_b=ch.q_b, q_case=ch.q_case)
+    if ctx.events is not None:
+        out["breakaway"] = model.predict_breakaway(p, ctx.spec, ctx.events, ctx.mechanisms)
+    return out
+
+
+def _residual_natural(values: dict, ctx: _Ctx):
+    pred = _predictions(values, ctx)
+    return jnp.concatenate([(ctx.observed[c] - pred[c]) * ctx.weights[c] for c in CHANNELS if c in ctx.observed])
+
+
+def _from_unconstrained(y, ctx: _Ctx) -> dict:
+    pos = np.array(ctx.positive, dtype=bool)
+    v = jnp.where(pos, jnp.exp(y), y) * ctx.scales
+    return {k: v[i] for i, k in enumerate(ctx.free)}
+
+
+def _to_unconstrained(values: dict, ctx: _Ctx):
+    pos = np.array(ctx.positive, dtype=bool)
+    v = jnp.stack([jnp.asarray(values[k], dtype=jnp.float64) for k in ctx.free]) / ctx.scales
+    return jnp.where(pos, jnp.log(jnp.where(pos, v, 1.0)), v)
+
+
+def _residual_unconstrained(y, ctx: _Ctx):
+    return _residual_natural(_from_unconstrained(y, ctx), ctx)
+
+
+_residual_jit = eqx.filter_jit(_residual_natural)
+_jacobian_jit = eqx.filter_jit(jax.jacfwd(_residual_natural))
+_predictions_jit = eqx.filter_jit(_predictions)
+
+
+@eqx.filter_jit
+def _levenberg_marquardt(y0, ctx: _Ctx, rtol, atol, max_steps):
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    return optx.least_squares(_residual_unconstrained, solver, y0, args=ctx, max_steps=max_steps, throw=False)
+
+
+class _Problem:
+    """The data of a fit, per sample and reduced to cells for the optimizer.
+
+    The optimizer sees cell means: samples of one run that share a shaft-angle
+    bin (``bins_per_pitch`` per piston pitch, over the whole revolution so that
+    shaft-order effects survive).  Inside a steady run speed, pressures and
+    viscosity hardly change, so the model of the cell mean is the mean of the
+    model; the parameter-free S(θ) is averaged exactly.  The fit then costs the
+    same for 10 k or 3 M rows of the same runs.
+    """
+
+    def __init__(self, data, spec, free, held, mechanisms, bins_per_pitch=48):
+        self.data, self.spec, self.free, self.held = data, spec, list(free), dict(held)
+        self.mechanisms = tuple(mechanisms)
+        self.has_running = data.running is not None and int(np.asarray(data.running.theta).size) > 0
+        self.has_events = data.events is not None and int(np.asarray(data.held_torque).size) > 0
+        self.measured = {c: np.asarray(data.measured[c], dtype=float) for c in RUNNING_CHANNELS} if self.has_running else {}
+        self.held_torque = np.asarray(data.held_torque, dtype=float) if self.has_events else np.zeros(0)
+        self.run_of = np.asarray(data.run_of_sample, dtype=int) if self.has_running else np.zeros(0, int)
+        if self.has_running:
+            bins = bins_per_pitch * spec.pistons
+            theta = np.mod(np.asarray(data.running.theta), 2 * np.pi)
+            b = np.minimum((theta / (2 * np.pi) * bins).astype(np.int64), bins - 1)
+            key = self.run_of.astype(np.int64) * bins + b
+            _, self.cell_of = np.unique(key, return_inverse=True)
+            self.n_cells = int(self.cell_of.max()) + 1
+            counts = np.bincount(self.cell_of, minlength=self.n_cells).astype(float)
+            self.cell_run = np.zeros(self.n_cells, int)
+            self.cell_run[self.cell_of] = self.run_of
+            self.cell_samples = Samples(*[
+                jnp.asarray(np.bincount(self.cell_of, weights=np.asarray(f, dtype=float), minlength=self.n_cells) / counts)
+                for f in data.running
+            ])
+        self.cells = None
+
+    def observed(self):
+        out = dict(self.measured)
+        if self.has_events:
+            out["breakaway"] = self.held_torque
+        return out
+
+    def set_cells(self, inliers: dict, sigma_runs: dict, sigma_breakaway: float | None):
+        """Cell means of each channel over its inlier samples, and their weights."""
+        obs, w = {}, {}
+        for c in RUNNING_CHANNELS if self.has_running else ():
+            ok = inliers[c]
+            y = np.where(ok, self.measured[c], 0.0)
+            cnt = np.bincount(self.cell_of, weights=ok.astype(float), minlength=self.n_cells)
+            tot = np.bincount(self.cell_of, weights=y, minlength=self.n_cells)
+            obs[c] = jnp.asarray(np.where(cnt > 0, tot / np.maximum(cnt, 1), 0.0))
+            w[c] = jnp.asarray(np.sqrt(cnt) / sigma_runs[c][self.cell_run])
+        if self.has_events:
+            ok = inliers["breakaway"]
+            obs["breakaway"] = jnp.asarray(np.where(ok, self.held_torque, 0.0))
+            w["breakaway"] = jnp.asarray(np.where(ok, 1.0 / sigma_breakaway, 0.0))
+        self.cells = (obs, w)
+
+    def ctx(self, scales=None) -> _Ctx:
+        free = tuple(self.free)
+        if scales is None:
+            scales = np.ones(len(free))
+        positive = tuple(bool(model.parameter_info(k, self.mechanisms).positive) for k in free)
+        obs, w = self.cells
+        return _Ctx(
+            spec=self.spec, mechanisms=self.mechanisms, free=free, positive=positive,
+            scales=jnp.asarray(scales, dtype=jnp.float64),
+            held={k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()},
+            running=self.cell_samples if self.has_running else None,
+            events=self.data.events if self.has_events else None,
+            observed=obs, weights=w,
+        )
+
+    def predictions(self, values: dict) -> dict:
+        """Per-sample predictions of every channel (not the cells)."""
+        ctx = _Ctx(
+            spec=self.spec, mechanisms=self.mechanisms, free=tuple(self.free), positive=(),
+            scales=jnp.zeros(0), held={k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()},
+            running=self.data.running if self.has_running else None,
+            events=self.data.events if self.has_events else None, observed={}, weights={},
+        )
+        return {c: np.asarray(v) for c, v in _predictions_jit(_as_jnp(values), ctx).items()}
+
+
+def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions | None = None,
+                      initial: dict | None = None) -> FitResult:
+    """Fit the model (plus ``mechanisms``) to extracted bench data.
+
+    data : an :class:`motorid.identify.extract.Dataset` (running samples and their
+        measured channels, breakaway events and their held torques)
+    spec : :class:`motorid.spec.MotorSpec`
+    mechanisms : extra physics (discrepancy catalog) whose parameters are fitted too
+    initial : starting values (defaults: typical sizes, then a Gauss-Newton start)
+    """
+    opt = options or FitOptions()
+    harmonics = spec.leak_harmonics if opt.harmonics is None else opt.harmonics
+    names = model.parameter_names(harmonics)
+    for mech in mechanisms:
+        names += list(mech.parameters)
+    start = model.default_parameters(spec)
+    start = {k: start.get(k, 0.0) for k in model.parameter_names(harmonics)}
+    for mech in mechanisms:
+        start.update(mech.initial())
+    if initial:
+        start.update({k: float(v) for k, v in initial.items() if k in names and v is not None})
+
+    reasons = coverage_reasons(data, spec, names)
+    fixed = {k: float(v) for k, v in opt.fixed.items()}
+    held = {k: start[k] for k in names if k in reasons}
+    held.update(fixed)
+    free = [k for k in names if k not in held]
+    warnings: list[str] = []
+
+    problem = _Problem(data, spec, free, held, mechanisms, opt.bins_per_pitch)
+    obs = problem.observed()
+    run_of = problem.run_of
+    n_runs = int(run_of.max()) + 1 if run_of.size else 0
+
+    # model-free start of the noise levels: first differences within each run
+    sig_runs = {c: _floor_noise(_initial_noise(obs[c], run_of, n_runs), obs[c]) for c in RUNNING_CHANNELS if c in obs}
+    sig_brk = None
+    if "breakaway" in obs:
+        sig_brk = max(_robust_std(np.diff(obs["breakaway"])) / np.sqrt(2) if obs["breakaway"].size > 2 else 1.0, 1e-6)
+    inliers = {c: np.isfinite(v) for c, v in obs.items()}
+    values = {k: float(start[k]) for k in free}
+
+    steps_total, converged = 0, True
+    for round_ in range(opt.rounds):
+        problem.set_cells(inliers, sig_runs, sig_brk)
+        values, steps, converged, free, reasons = _solve(problem, values, free, reasons, opt, first=(round_ == 0))
+        steps_total += steps
+        pred = problem.predictions(values)
+        res = {c: obs[c] - pred[c] for c in obs}
+        # re-estimate the noise from the residuals, then reject outliers against it
+        new_inliers = {}
+        for c in obs:
+            r = np.where(inliers[c], res[c], np.nan)
+            if c == "breakaway":
+                finite = r[np.isfinite(r)]
+                est = _robust_std(finite) if finite.size >= 8 else (np.std(finite) if finite.size > 1 else np.nan)
+                scale = np.nanmax(np.abs(obs[c])) if np.any(np.isfinite(obs[c])) else 1.0
+                sig_brk = float(max(est, 1e-9 * scale)) if np.isfinite(est) else 1.0
+                new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * sig_brk)
+            else:
+                sig_runs[c] = _floor_noise(_residual_noise(r, run_of, n_runs), obs[c])
+                new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * sig_runs[c][run_of])
+        stable = all(np.array_equal(new_inliers[c], inliers[c]) for c in obs)
+        inliers = new_inliers
+        if stable and round_ >= 1:
+            break
+    # final solve with the settled noise and inliers
+    problem.set_cells(inliers, sig_runs, sig_brk)
+    values, steps, converged, free, reasons = _solve(problem, values, free, reasons, opt, first=False)
+    steps_total += steps
+    if not converged:
+        warnings.append("Levenberg-Marquardt stopped at max_steps before converging; raise FitOptions.max_steps")
+
+    # covariance in natural units from the weighted Jacobian of the cells at the optimum
+    x_free = _as_jnp(values)
+    ctx = problem.ctx()
+    J = np.zeros((0, 0))
+    if free:
+        jac = _jacobian_jit(x_free, ctx)
+        J = np.column_stack([np.asarray(jac[k]) for k in free])
+    pred = problem.predictions(values)
+    residuals = {c: obs[c] - pred[c] for c in obs}
+    sig = {c: sig_runs[c][run_of] for c in sig_runs}
+    if "breakaway" in obs:
+        sig["breakaway"] = np.full(obs["breakaway"].shape, sig_brk)
+    used = {c: int(np.sum(inliers[c])) for c in obs}
+    chi2 = float(sum(np.sum((residuals[c][inliers[c]] / sig[c][inliers[c]]) ** 2) for c in obs))
+    dof = max(sum(used.values()) - len(free), 1)
+    cov = _covariance(J) if free else np.zeros((0, 0))
+    if chi2 / dof > 1.0:
+        cov = cov * (chi2 / dof)  # noise underestimated: widen, never narrow
+    std = np.sqrt(np.clip(np.diag(cov), 0, None)) if free else np.zeros(0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(std, std) if free else cov
+
+    all_params = {**{k: float(v) for k, v in problem.held.items()}, **{k: float(v) for k, v in values.items()}}
+    out_values, out_std, ident = {}, {}, {}
+    for k in names:
+        if k in free:
+            i = free.index(k)
+            out_values[k], out_std[k], ident[k] = float(values[k]), float(std[i]), True
+        elif k in fixed:
+            out_values[k], out_std[k], ident[k] = float(fixed[k]), 0.0, True
+            reasons.pop(k, None)
+        else:
+            out_values[k], out_std[k], ident[k] = None, None, False
+    for k in free:
+        info = model.parameter_info(k, mechanisms)
+        if info.positive and out_values[k] < 1e-4 * abs(start.get(k) or info.typical):
+            warnings.append(f"{k} is at its lower bound 0: the data show no sign of it")
+        elif info.positive and out_std[k] > abs(out_values[k]):
+            warnings.append(f"{k}: standard error exceeds the value; the logs barely constrain it")
+
+    noise = {}
+    for c in obs:
+        has = np.isfinite(obs[c])
+        if not has.any():
+            noise[c] = None
+        elif c == "breakaway":
+            noise[c] = float(sig_brk)
+        else:
+            noise[c] = float(np.median(sig_runs[c][np.unique(run_of[has])]))
+    return FitResult(
+        names=names, free=free, values=out_values, std=out_std, covariance=cov, correlation=corr,
+        identifiable=ident, reasons=reasons, noise=noise, noise_by_run=dict(sig_runs),
+        outliers={c: int(np.sum(np.isfinite(obs[c]) & ~inliers[c])) for c in obs},
+        used=used, chi2=chi2, dof=dof, steps=steps_total, converged=bool(converged), warnings=warnings,
+        residuals=residuals, sigma=sig, inliers=inliers, params_all=all_params, mechanisms=tuple(mechanisms), problem=problem,
+    )
+
+
+def _as_jnp(values: dict) -> dict:
+    return {k: jnp.asarray(v, dtype=jnp.float64) for k, v in values.items()}
+
+
+def _covariance(J: np.ndarray) -> np.ndarray:
+    """(JᵀJ)⁻¹ of a weighted Jacobian, computed on unit-norm columns."""
+    norms = np.linalg.norm(J, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    _, s, vt = np.linalg.svd(J / norms, full_matrices=False)
+    keep = s > s[0] * 1e-12
+    inv = np.zeros_like(s)
+    inv[keep] = 1.0 / s[keep] ** 2
+    return ((vt.T * inv) @ vt) / np.outer(norms, norms)
+
+
+def _null_space_names(J: np.ndarray, free: list, tol: float) -> dict:
+    """Parameters in directions the weighted Jacobian cannot see."""
+    norms = np.linalg.norm(J, axis=0)
+    out = {}
+    for i, k in enumerate(free):
+        if norms[i] == 0 or not np.isfinite(norms[i]):
+            out[k] = "the fitted channels do not depend on it in these logs"
+    cols = np.where((norms > 0) & np.isfinite(norms))[0]
+    if cols.size == 0:
+        return out
+    Jn = J[:, cols] / norms[cols]
+    _, s, vt = np.linalg.svd(Jn, full_matrices=False)
+    weak = np.where(s < tol * s[0])[0]
+    for j in weak:
+        involved = [free[cols[i]] for i in np.where(np.abs(vt[j]) > 0.2)[0]]
+        for k in involved:
+            others = [o for o in involved if o != k]
+            out.setdefault(k, "cannot be told apart from " + ", ".join(others) + " with these logs"
+                           if others else "the logs do not determine it")
+    return out
+
+
+def _solve(problem: _Problem, values: dict, free: list, reasons: dict, opt: FitOptions, first: bool):
+    """Gauss-Newton start (first round), null-space check, then Levenberg-Marquardt."""
+    mechs = problem.mechanisms
+    values = dict(values)
+    if first and free:
+        # the base model is linear in most parameters: a few Gauss-Newton steps in
+        # natural (scaled) coordinates land next to the optimum from any start
+        for _ in range(6):
+            ctx = problem.ctx()
+            x = _as_jnp(values)
+            r = np.asarray(_residual_jit(x, ctx))
+            jac = _jacobian_jit(x, ctx)
+            scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
+            J = np.column_stack([np.asarray(jac[k]) for k in free]) * scales
+            bad = _null_space_names(J, free, opt.null_space_tol)
+            if bad:
+                for k, why in bad.items():
+                    reasons[k] = why
+                    problem.held[k] = values.pop(k)
+                free = [k for k in free if k not in bad]
+                problem.free = free
+                if not free:
+                    break
+                continue
+            step, *_ = np.linalg.lstsq(J, -r, rcond=None)
+            for i, k in enumerate(free):
+                values[k] = values[k] + step[i] * scales[i]
+        for k in free:
+            info = model.parameter_info(k, mechs)
+            if info.positive and values[k] <= 0:
+                values[k] = 1e-3 * info.typical
+    if not free:
+        return values, 0, True, free, reasons
+    scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
+    ctx = problem.ctx(scales)
+    y0 = _to_unconstrained(_as_jnp(values), ctx)
+    sol = _levenberg_marquardt(y0, ctx, opt.rtol, opt.atol, opt.max_steps)
+    ok = bool(sol.result == optx.RESULTS.successful)
+    new = {k: float(v) for k, v in _from_unconstrained(sol.value, ctx).items()}
+    before = float(jnp.sum(_residual_jit(_as_jnp(values), ctx) ** 2))
+    after = float(jnp.sum(_residual_jit(_as_jnp(new), ctx) ** 2))
+    if after <= before * (1 + 1e-12):
+        values = new
+    return values, int(sol.stats.get("num_steps", 0)), ok, free, reasons
