@@ -1,0 +1,47 @@
+"""From log files to a fit: read, validate, extract, least squares, (emcee)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+from motorid.identify.least_squares import FitOptions, FitResult, fit_least_squares
+
+
+@dataclass
+class Identification:
+    ls: FitResult
+    bayes: object  # BayesResult or None
+    dataset: object
+    frame: object
+    seconds: float
+    priors: dict
+
+
+def load_campaign(paths: Sequence, spec):
+    """Read and validate the logs, then extract steady samples and breakaway events."""
+    from motorid.identify.extract import extract
+    from motorid.logs import read_logs
+
+    frame = read_logs([str(p) for p in paths], spec)
+    return frame, extract(frame, spec)
+
+
+def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | None = None,
+             mechanisms: Sequence = (), seed: int = 0, progress: bool | None = None,
+             dataset=None, frame=None) -> Identification:
+    """The main job: a least-squares fit of every parameter the logs identify, and
+    with ``bayes`` an emcee posterior started from it."""
+    t0 = time.time()
+    if dataset is None:
+        frame, dataset = load_campaign(paths, spec)
+    ls = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=options)
+    post, priors = None, {}
+    if bayes and ls.free:
+        from motorid.identify.bayes import prior_scale, sample_posterior
+
+        post = sample_posterior(ls, spec, seed=seed, progress=progress)
+        priors = {k: (f"HalfNormal(scale={prior_scale(k, spec, ls.mechanisms):.3g})"
+                      if not k.startswith("KL_") else "Normal(0, 1)") for k in ls.free}
+    return Identification(ls, post, dataset, frame, time.time() - t0, priors)

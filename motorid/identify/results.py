@@ -1,0 +1,144 @@
+"""result.json: what a fit found, in the form of BENCH_LOG_FORMAT.md."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from motorid import model
+from motorid.identify.least_squares import CHANNEL_UNITS, FitResult
+
+RESULT_FILE = "result.json"
+CHAIN_FILE = "chain.npz"
+
+
+def versions() -> dict:
+    import emcee
+    import jax
+    import optimistix
+    import pandas
+    import scipy
+
+    import motorid
+
+    return {"motorid": motorid.__version__, "python": platform.python_version(), "numpy": np.__version__,
+            "scipy": scipy.__version__, "pandas": pandas.__version__, "jax": jax.__version__,
+            "optimistix": optimistix.__version__, "emcee": emcee.__version__}
+
+
+def _clean(x):
+    """JSON-safe: numpy scalars to float, NaN/inf to None."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _clean(x.tolist())
+    if isinstance(x, (np.bool_, bool)):
+        return bool(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if np.isfinite(x) else None
+    return x
+
+
+def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict | None = None,
+                    seconds: float | None = None, priors: dict | None = None) -> dict:
+    """The result.json document of a least-squares (and optional Bayesian) fit."""
+    params = {}
+    for k in ls.names:
+        info = model.parameter_info(k, ls.mechanisms)
+        entry = {"value": ls.values[k], "unit": info.unit, "std": ls.std[k], "ci95": None,
+                 "identifiable": bool(ls.identifiable[k]), "meaning": info.meaning}
+        if ls.identifiable[k] and ls.values[k] is not None and ls.std[k] is not None:
+            entry["ci95"] = [ls.values[k] - 1.959964 * ls.std[k], ls.values[k] + 1.959964 * ls.std[k]]
+        else:
+            entry["reason"] = ls.reasons.get(k, "not determined by these logs")
+        if bayes is not None and k in bayes.median:
+            entry["posterior"] = {"median": bayes.median[k], "std": bayes.std[k], "ci95": bayes.ci95[k]}
+        params[k] = entry
+    doc = {
+        "motor": {"name": spec.name, "pistons": spec.pistons, "displacement_m3": spec.displacement,
+                  "inertia_kg_m2": spec.inertia, "leak_phase_rad": spec.phase},
+        "inputs": inputs or {},
+        "parameters": params,
+        "noise": {c: {"sigma": v, "unit": CHANNEL_UNITS[c]} for c, v in ls.noise.items()},
+        "fit": {
+            "method": "optimistix.LevenbergMarquardt, all channels jointly, residuals weighted by the "
+                      "noise level of each channel and run estimated from the data",
+            "chi2": ls.chi2, "dof": ls.dof, "reduced_chi2": ls.reduced_chi2, "steps": ls.steps,
+            "converged": ls.converged, "warnings": list(ls.warnings),
+            "outliers": ls.outliers, "used": ls.used, "seconds": seconds,
+            "mechanisms": [m.id for m in ls.mechanisms],
+        },
+        "correlation": {"names": list(ls.free), "matrix": ls.correlation},
+        "versions": versions(),
+    }
+    if dataset is not None:
+        doc["data"] = dataset_summary(dataset)
+    if bayes is not None:
+        doc["mcmc"] = {
+            "sampler": "emcee.EnsembleSampler (DEMove), vectorized JAX log-posterior",
+            "tau": bayes.tau, "ess": bayes.ess, "converged": bayes.converged,
+            "acceptance": bayes.acceptance, "steps": bayes.steps, "walkers": bayes.walkers,
+            "burn": bayes.burn, "thin": bayes.thin, "seconds": bayes.seconds,
+            "warnings": bayes.warnings, "chain_file": CHAIN_FILE, "priors": priors or {},
+        }
+    return _clean(doc)
+
+
+def dataset_summary(ds) -> dict:
+    runs = []
+    if getattr(ds, "runs", None) is not None:
+        for rec in ds.runs.to_dict(orient="records"):
+            runs.append({k: (v.item() if hasattr(v, "item") else v) for k, v in rec.items()})
+    by_protocol: dict = {}
+    for r in runs:
+        p = by_protocol.setdefault(str(r.get("protocol")), {"runs": 0, "samples": 0, "steady": 0})
+        p["runs"] += 1
+        p["samples"] += int(r.get("n_samples", 0) or 0)
+        p["steady"] += int(r.get("n_steady", 0) or 0)
+    return {
+        "protocols": by_protocol,
+        "runs": runs,
+        "events": int(np.asarray(ds.held_torque).size) if getattr(ds, "held_torque", None) is not None else 0,
+        "excluded": dict(getattr(ds, "excluded", {}) or {}),
+        "notes": list(getattr(ds, "notes", []) or []),
+    }
+
+
+def write_json_atomic(doc: dict, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(doc, fh, indent=1, allow_nan=False)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def write_chain(bayes, path) -> Path:
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".npz")
+    os.close(fd)
+    try:
+        np.savez_compressed(tmp, chain=bayes.chain, log_prob=bayes.log_prob, names=np.array(bayes.names),
+                            burn=bayes.burn, thin=bayes.thin)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
