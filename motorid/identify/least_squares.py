@@ -45,6 +45,11 @@ class FitOptions:
     null_space_tol: float = 1e-7  # relative singular value below which a direction is unidentified
     fixed: dict = field(default_factory=dict)  # parameters held at given values
     bins_per_pitch: int = 192  # shaft-angle cells per piston pitch (data reduction)
+    # hold the noise levels (channel -> σ per run; "breakaway" -> σ) and the
+    # inlier masks (channel -> bool per sample) of an earlier fit: to compare
+    # models on equal terms, or to hold runs out of a fit
+    fixed_noise: dict | None = None
+    fixed_inliers: dict | None = None
 
 
 @dataclass
@@ -269,6 +274,30 @@ def _levenberg_marquardt(y0, ctx: _Ctx, rtol, atol, max_steps):
     return optx.least_squares(_residual_unconstrained, solver, y0, args=ctx, max_steps=max_steps, throw=False)
 
 
+def bucket(n: int, minimum: int = 64) -> int:
+    """Padded array length: the next power of two (so that campaigns of similar
+    size share compiled functions instead of recompiling for every length)."""
+    return max(minimum, 1 << max(int(n) - 1, 0).bit_length())
+
+
+_PAD = {"viscosity": 1.0, "temperature": 40.0}
+
+
+def pad_samples(s: Samples, size: int) -> Samples:
+    """Samples padded to ``size`` with harmless values (weights there are zero)."""
+    n = int(np.asarray(s.theta).size)
+    return Samples(*[
+        jnp.concatenate([jnp.asarray(f, dtype=jnp.float64),
+                         jnp.full(size - n, _PAD.get(name, 0.0), dtype=jnp.float64)])
+        for name, f in zip(Samples._fields, s)
+    ])
+
+
+def pad(x, size: int, value: float = 0.0):
+    x = np.asarray(x, dtype=float)
+    return np.concatenate([x, np.full(size - x.size, value)])
+
+
 class _Problem:
     """The data of a fit, per sample and reduced to cells for the optimizer.
 
@@ -298,10 +327,16 @@ class _Problem:
             counts = np.bincount(self.cell_of, minlength=self.n_cells).astype(float)
             self.cell_run = np.zeros(self.n_cells, int)
             self.cell_run[self.cell_of] = self.run_of
-            self.cell_samples = Samples(*[
-                jnp.asarray(np.bincount(self.cell_of, weights=np.asarray(f, dtype=float), minlength=self.n_cells) / counts)
+            self.cell_size = bucket(self.n_cells)
+            self.cell_samples = pad_samples(Samples(*[
+                np.bincount(self.cell_of, weights=np.asarray(f, dtype=float), minlength=self.n_cells) / counts
                 for f in data.running
-            ])
+            ]), self.cell_size)
+            self.n_samples = int(self.run_of.size)
+            self.running_padded = pad_samples(data.running, bucket(self.n_samples))
+        if self.has_events:
+            self.n_events = int(self.held_torque.size)
+            self.events_padded = pad_samples(data.events, bucket(self.n_events, 16))
         self.cells = None
 
     def observed(self):
@@ -318,12 +353,13 @@ class _Problem:
             y = np.where(ok, self.measured[c], 0.0)
             cnt = np.bincount(self.cell_of, weights=ok.astype(float), minlength=self.n_cells)
             tot = np.bincount(self.cell_of, weights=y, minlength=self.n_cells)
-            obs[c] = jnp.asarray(np.where(cnt > 0, tot / np.maximum(cnt, 1), 0.0))
-            w[c] = jnp.asarray(np.sqrt(cnt) / sigma_runs[c][self.cell_run])
+            obs[c] = jnp.asarray(pad(np.where(cnt > 0, tot / np.maximum(cnt, 1), 0.0), self.cell_size))
+            w[c] = jnp.asarray(pad(np.sqrt(cnt) / sigma_runs[c][self.cell_run], self.cell_size))
         if self.has_events:
             ok = inliers["breakaway"]
-            obs["breakaway"] = jnp.asarray(np.where(ok, self.held_torque, 0.0))
-            w["breakaway"] = jnp.asarray(np.where(ok, 1.0 / sigma_breakaway, 0.0))
+            size = int(np.asarray(self.events_padded.theta).size)
+            obs["breakaway"] = jnp.asarray(pad(np.where(ok, self.held_torque, 0.0), size))
+            w["breakaway"] = jnp.asarray(pad(np.where(ok, 1.0 / sigma_breakaway, 0.0), size))
         self.cells = (obs, w)
 
     def ctx(self, scales=None) -> _Ctx:
@@ -337,7 +373,7 @@ class _Problem:
             scales=jnp.asarray(scales, dtype=jnp.float64),
             held={k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()},
             running=self.cell_samples if self.has_running else None,
-            events=self.data.events if self.has_events else None,
+            events=self.events_padded if self.has_events else None,
             observed=obs, weights=w,
         )
 
@@ -346,10 +382,13 @@ class _Problem:
         ctx = _Ctx(
             spec=self.spec, mechanisms=self.mechanisms, free=tuple(self.free), positive=(),
             scales=jnp.zeros(0), held={k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()},
-            running=self.data.running if self.has_running else None,
-            events=self.data.events if self.has_events else None, observed={}, weights={},
+            running=self.running_padded if self.has_running else None,
+            events=self.events_padded if self.has_events else None, observed={}, weights={},
         )
-        return {c: np.asarray(v) for c, v in _predictions_jit(_as_jnp(values), ctx).items()}
+        out = _predictions_jit(_as_jnp(values), ctx)
+        n = {c: self.n_samples for c in RUNNING_CHANNELS}
+        n["breakaway"] = getattr(self, "n_events", 0)
+        return {c: np.asarray(v)[: n[c]] for c, v in out.items()}
 
 
 def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions | None = None,
@@ -395,7 +434,15 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     values = {k: float(start[k]) for k in free}
 
     steps_total, converged = 0, True
-    for round_ in range(opt.rounds):
+    first_final = False
+    if opt.fixed_noise is not None:
+        sig_runs = {c: np.asarray(opt.fixed_noise[c], dtype=float) for c in sig_runs}
+        sig_brk = opt.fixed_noise.get("breakaway", sig_brk)
+    if opt.fixed_inliers is not None:
+        inliers = {c: np.asarray(opt.fixed_inliers[c], dtype=bool) & np.isfinite(obs[c]) for c in obs}
+    rounds = 0 if (opt.fixed_noise is not None and opt.fixed_inliers is not None) else opt.rounds
+    first_final = rounds == 0
+    for round_ in range(rounds):
         problem.set_cells(inliers, sig_runs, sig_brk)
         values, steps, converged, free, reasons = _solve(problem, values, free, reasons, opt, first=(round_ == 0))
         steps_total += steps
@@ -405,7 +452,10 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         new_inliers = {}
         for c in obs:
             r = np.where(inliers[c], res[c], np.nan)
-            if c == "breakaway":
+            if opt.fixed_noise is not None:
+                new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * (
+                    sig_brk if c == "breakaway" else sig_runs[c][run_of]))
+            elif c == "breakaway":
                 finite = r[np.isfinite(r)]
                 est = _robust_std(finite) if finite.size >= 8 else (np.std(finite) if finite.size > 1 else np.nan)
                 scale = np.nanmax(np.abs(obs[c])) if np.any(np.isfinite(obs[c])) else 1.0
@@ -420,7 +470,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
             break
     # final solve with the settled noise and inliers
     problem.set_cells(inliers, sig_runs, sig_brk)
-    values, steps, converged, free, reasons = _solve(problem, values, free, reasons, opt, first=False)
+    values, steps, converged, free, reasons = _solve(problem, values, free, reasons, opt, first=first_final)
     steps_total += steps
     if not converged:
         warnings.append("Levenberg-Marquardt stopped at max_steps before converging; raise FitOptions.max_steps")

@@ -1,0 +1,210 @@
+"""Name and model the missing physics: fit candidates, compare, keep what earns its place.
+
+Forward selection over the catalog (:mod:`motorid.discrepancy.catalog`):
+
+1. fit the base model; :func:`~motorid.discrepancy.locate.locate` its residuals;
+2. if structure is found, fit the current model plus each candidate mechanism
+   that touches a channel with structure, with the noise levels and outlier
+   set of the base fit held fixed so that χ² values compare;
+3. score each by evidence that punishes extra parameters,
+   ΔBIC = Δχ² − k ln N (k extra parameters, N residuals), and the best few by
+   the χ² of runs held out of the fit (K-fold over runs);
+4. keep the best if ΔBIC exceeds ``min_evidence``, the held-out error falls
+   and it removes some located structure; repeat while structure remains;
+5. refit the final model (noise re-estimated) and report what is left
+   unexplained in words — never forcing a name on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
+from motorid.identify.least_squares import FitOptions, FitResult, fit_least_squares
+
+
+@dataclass
+class Candidate:
+    mechanism: object
+    fit: FitResult
+    delta_chi2: float
+    delta_bic: float
+    cv_gain: float | None = None  # held-out χ² of the current model minus this one's
+    removed: list = field(default_factory=list)  # structures it explains
+
+
+@dataclass
+class Diagnosis:
+    mismatch: bool
+    base: FitResult
+    final: FitResult
+    accepted: list  # [Candidate]
+    location_before: Location
+    location_after: Location
+    steps: list  # per stage: [{id, delta_bic, cv_gain, accepted}]
+    unexplained: list  # [Structure]
+
+
+def _fixed(ls: FitResult) -> tuple[dict, dict]:
+    noise = {c: ls.noise_by_run[c] for c in ls.noise_by_run}
+    if "breakaway" in ls.noise and ls.noise["breakaway"] is not None:
+        noise["breakaway"] = ls.noise["breakaway"]
+    return noise, dict(ls.inliers)
+
+
+def _n_residuals(ls: FitResult) -> int:
+    return int(sum(ls.used.values()))
+
+
+def _folds(dataset, k: int) -> list[np.ndarray]:
+    """Run indices in k folds, spread over speed and protocol."""
+    runs = dataset.runs
+    order = np.lexsort((runs["speed_median_rad_s"].abs().to_numpy(), runs["protocol"].astype(str).to_numpy()))
+    folds = [[] for _ in range(k)]
+    for i, r in enumerate(order):
+        folds[i % k].append(int(r))
+    return [np.array(f, dtype=int) for f in folds]
+
+
+def _held_out_chi2(dataset, spec, mechanisms, noise, inliers, initial, folds) -> float:
+    run_of = np.asarray(dataset.run_of_sample, dtype=int)
+    ev_run = np.asarray(getattr(dataset, "run_of_event", np.zeros(0, int)), dtype=int)
+    total = 0.0
+    for fold in folds:
+        keep = {}
+        held = {}
+        for c, mask in inliers.items():
+            where = np.isin(ev_run, fold) if c == "breakaway" else np.isin(run_of, fold)
+            keep[c] = mask & ~where
+            held[c] = mask & where
+        fit = fit_least_squares(dataset, spec, mechanisms, FitOptions(fixed_noise=noise, fixed_inliers=keep),
+                                initial=initial)
+        for c, mask in held.items():
+            if not mask.any():
+                continue
+            sig = np.full(mask.shape, noise[c]) if c == "breakaway" else np.asarray(noise[c])[run_of]
+            r = fit.residuals[c][mask] / sig[mask]
+            total += float(np.sum(np.minimum(r**2, 25.0)))  # a held-out spike counts like an outlier
+    return total
+
+
+def _structure_key(s) -> tuple:
+    return (s.channel, s.variable, s.order)
+
+
+def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
+             alpha: float = 1e-3, min_effect: float = 0.1, folds: int = 4, cv_top: int = 2,
+             max_mechanisms: int = 3, progress=None) -> Diagnosis:
+    """Find, name and model what the base model leaves out (see module doc)."""
+    from motorid.discrepancy.catalog import all_mechanisms
+
+    say = progress or (lambda msg: None)
+    catalog = list(mechanisms) if mechanisms is not None else all_mechanisms()
+    base = base or fit_least_squares(dataset, spec)
+    noise, inliers = _fixed(base)
+    loc0 = locate(base, dataset, spec, alpha=alpha, min_effect=min_effect)
+    current, current_mechs, accepted, steps = base, [], [], []
+    loc = loc0
+    fold_runs = _folds(dataset, folds)
+    n_res = max(_n_residuals(base), 2)
+    current_cv = None
+    while loc.significant and len(accepted) < max_mechanisms:
+        channels = {s.channel for s in loc.significant}
+        say(f"structure in {', '.join(sorted(channels))}; trying {len(catalog) - len(current_mechs)} mechanisms")
+        scored = []
+        for mech in catalog:
+            if mech in current_mechs or not channels & set(mech.channels):
+                continue
+            fit = fit_least_squares(dataset, spec, current_mechs + [mech],
+                                    FitOptions(fixed_noise=noise, fixed_inliers=inliers),
+                                    initial=current.params_all)
+            d = current.chi2 - fit.chi2
+            k = sum(1 for p in mech.parameters if fit.identifiable.get(p))
+            scored.append(Candidate(mech, fit, d, d - k * np.log(n_res)))
+        if not scored:
+            break
+        scored.sort(key=lambda c: -c.delta_bic)
+        if current_cv is None and folds > 1:
+            current_cv = _held_out_chi2(dataset, spec, current_mechs, noise, inliers, current.params_all, fold_runs)
+        for cand in scored[:cv_top]:
+            if cand.delta_bic <= min_evidence or folds < 2:
+                continue
+            cv = _held_out_chi2(dataset, spec, current_mechs + [cand.mechanism], noise, inliers,
+                                cand.fit.params_all, fold_runs)
+            cand.cv_gain = current_cv - cv
+            cand.cv = cv
+        best = None
+        for cand in scored[:cv_top]:
+            if cand.delta_bic > min_evidence and (folds < 2 or (cand.cv_gain or 0) > 0):
+                after = locate(cand.fit, dataset, spec, alpha=alpha, min_effect=min_effect)
+                before_keys = {_structure_key(s) for s in loc.significant}
+                after_keys = {_structure_key(s) for s in after.significant}
+                removed = [s for s in loc.significant if _structure_key(s) in before_keys - after_keys]
+                if removed or len(after.significant) < len(loc.significant):
+                    cand.removed = removed
+                    cand.location = after
+                    best = cand
+                    break
+        steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
+                       "cv_gain": c.cv_gain, "accepted": c is best} for c in scored])
+        if best is None:
+            break
+        say(f"kept {best.mechanism.id} (ΔBIC {best.delta_bic:.1f})")
+        accepted.append(best)
+        current_mechs.append(best.mechanism)
+        current = best.fit
+        current_cv = getattr(best, "cv", None)
+        loc = best.location
+    # final model with its own noise estimate
+    final = fit_least_squares(dataset, spec, current_mechs, initial=current.params_all) if accepted else base
+    loc_after = locate(final, dataset, spec, alpha=alpha, min_effect=min_effect) if accepted else loc0
+    unexplained = list(loc_after.significant)
+    return Diagnosis(mismatch=bool(accepted or unexplained), base=base, final=final, accepted=accepted,
+                     location_before=loc0, location_after=loc_after, steps=steps, unexplained=unexplained)
+
+
+def _rms(ls: FitResult, c: str):
+    r = ls.residuals[c][ls.inliers[c]]
+    return float(np.sqrt(np.mean(r**2))) if r.size else None
+
+
+def diagnosis_document(dg: Diagnosis, spec) -> dict:
+    """diagnosis.json: what was found, where, and what it did to the fit."""
+    from motorid.identify.results import _clean
+    from motorid.model import parameter_info
+
+    mechs = []
+    for cand in dg.accepted:
+        m = cand.mechanism
+        params = {k: {"value": dg.final.values.get(k), "std": dg.final.std.get(k),
+                      "unit": parameter_info(k, dg.final.mechanisms).unit} for k in m.parameters}
+        where = "; ".join(s.where for s in cand.removed[:4]) or "; ".join(
+            s.where for s in dg.location_before.significant if s.channel in m.channels)[:400]
+        try:
+            words = m.describe({k: dg.final.values.get(k) for k in m.parameters})
+        except Exception:  # a description is a courtesy, never a failure
+            words = ""
+        mechs.append({
+            "id": m.id, "name": m.name, "channels": list(m.channels), "where": where,
+            "explanation": f"{m.physics} {words}".strip(), "reference": m.reference,
+            "parameters": params,
+            "evidence": {"delta_chi2": cand.delta_chi2, "delta_bic": cand.delta_bic,
+                         "held_out_chi2_gain": cand.cv_gain},
+        })
+    channels = sorted(dg.base.residuals)
+    doc = {
+        "mismatch": dg.mismatch,
+        "mechanisms": mechs,
+        "channels": {c: {"residual_rms_before": _rms(dg.base, c), "residual_rms_after": _rms(dg.final, c),
+                         "noise": dg.base.noise.get(c), "words": CHANNEL_WORDS[c]} for c in channels},
+        "parameters_before": {k: {"value": dg.base.values[k], "std": dg.base.std[k]} for k in dg.base.names},
+        "parameters_after": {k: {"value": dg.final.values.get(k), "std": dg.final.std.get(k)} for k in dg.base.names},
+        "located_before": [s.as_dict() for s in dg.location_before.significant],
+        "unexplained": [{"channel": s.channel, "where": s.where, "p_value": s.p_value,
+                         "effect": s.effect, "effect_sigma": s.effect_sigma} for s in dg.unexplained],
+        "selection": dg.steps,
+        "tests": {"count": dg.location_before.tests, "threshold_p": dg.location_before.threshold},
+    }
+    return _clean(doc)
