@@ -276,7 +276,7 @@ def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn)
         held_back = d * _held_load(truth, spec, drive, theta_set, np.full(R, tim.start_pressure), 0.0, -d)
         slips = held_back < load
         for r in np.flatnonzero(slips):
-            warn(f"{protocol.name} run {r + 1}: the load overhauls the motor at start_pressure_bar; "
+            warn(f"run {protocol.name}-{r + 1:03d}: the load overhauls the motor at start_pressure_bar; "
                  "the ramp starts where the pressure torque holds the load instead")
         start = np.where(slips, start, tim.start_pressure)
     drive["dp_start"] = start
@@ -304,12 +304,14 @@ def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn)
              - np.repeat(load[refine], sub)).reshape(-1, sub)
         t_sub = t_sub.reshape(-1, sub)
         for i, r in enumerate(refine):
-            k = int(np.flatnonzero(c[i] >= 0.0)[0])
-            t_break[r] = np.interp(0.0, [c[i, k - 1], c[i, k]], [t_sub[i, k - 1], t_sub[i, k]])
+            hits = np.flatnonzero(c[i] >= 0.0)
+            k = int(hits[0]) if hits.size else sub - 1  # (the bracket's end crossed on the DAQ grid)
+            t_break[r] = t_sub[i, k] if k == 0 else np.interp(0.0, [c[i, k - 1], c[i, k]],
+                                                             [t_sub[i, k - 1], t_sub[i, k]])
     for r in np.flatnonzero(first == 0):
-        warn(f"{protocol.name} run {r + 1}: the shaft breaks away at the start of the ramp")
+        warn(f"run {protocol.name}-{r + 1:03d}: the shaft breaks away at the start of the ramp")
     for r in np.flatnonzero(first < 0):
-        warn(f"{protocol.name} run {r + 1}: no breakaway up to max_pressure_bar")
+        warn(f"run {protocol.name}-{r + 1:03d}: no breakaway up to max_pressure_bar")
 
     # after breakaway: Karnopp, load-driven, up to the speed limiter
     broke = np.isfinite(t_break)
@@ -328,7 +330,7 @@ def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn)
         else:
             n = counts[r]
         t = np.arange(n) / fs
-        moving = t >= t_break[r] if broke[r] else np.zeros(n, bool)
+        moving = t > t_break[r] if broke[r] else np.zeros(n, bool)  # stuck up to the breakaway instant
         theta, speed = np.full(n, theta_set[r]), np.zeros(n)
         if broke[r]:
             theta[moving] = np.interp(t[moving], times[:, b], th[:, b])
@@ -390,7 +392,7 @@ def _flow_fed(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn) -> 
         t = np.arange(int(math.floor(durations[r] * plan.sample_rate + 1e-9)) + 1) / plan.sample_rate
         th_r, om_r, p_r = (np.interp(t, times[:, r], x[:, r]) for x in (th, om, p_in))
         if np.any(om_r == 0.0):
-            warn(f"{protocol.name} run {r + 1}: the shaft stalls (stick-slip is not simulated in "
+            warn(f"run {protocol.name}-{r + 1:03d}: the shaft stalls (stick-slip is not simulated in "
                  f"{protocol.procedure} runs); raise the flow or lower the load")
         pieces.append({"time_s": t, "theta_rad": th_r, "speed_rad_s": om_r, "p_in": p_r,
                        "moving": np.ones(t.size, bool)})
