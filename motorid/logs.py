@@ -216,42 +216,41 @@ def _read_text(path: Path) -> str:
 
 def _split_header(path: Path, text: str):
     """(header fields, delimiter, body text, 1-based line number of the header)."""
-    lines = text.splitlines(keepends=True)
-    for i, line in enumerate(lines):
-        stripped = line.strip()
-        if stripped and not stripped.startswith("#"):
+    pos, number = 0, 0
+    while True:  # skip blank lines and leading "#" comments
+        if pos >= len(text):
+            raise InputError(f"{path}: empty file (no header line)")
+        end = text.find("\n", pos)
+        end = len(text) if end < 0 else end + 1
+        header, pos, number = text[pos:end], end, number + 1
+        if header.strip() and not header.lstrip().startswith("#"):
             break
-    else:
-        raise InputError(f"{path}: empty file (no header line)")
-    header = lines[i]
     counts = {d: header.count(d) for d in (",", ";", "\t")}
     delim = max(counts, key=counts.get) if max(counts.values()) > 0 else ","
     fields = next(csv.reader([header.rstrip("\r\n")], delimiter=delim, skipinitialspace=True))
-    return [f.strip() for f in fields], delim, "".join(lines[i + 1:]), i + 1
+    return [f.strip() for f in fields], delim, text[pos:], number
 
 
 def _map_columns(path: Path, fields: list):
     """Header fields → {SI column or 'run_id'/'protocol': (field index, unit)}; extras."""
     found: dict = {}
     extras: dict = {}
-    seen: dict = {}
     for j, name in enumerate(fields):
         if name == "":
             continue
         norm = normalize_header(name)
-        if norm in seen:
-            raise InputError(f"{path}: column '{name}' appears twice (also as '{fields[seen[norm]]}')")
-        seen[norm] = j
         if norm in _TEXT_HEADERS:
             key, unit, words = _TEXT_HEADERS[norm], None, _TEXT_HEADERS[norm]
         elif norm in _HEADERS:
             q, unit = _HEADERS[norm]
             key, words = q.si, q.words
-        else:
-            extras[j] = name
+        else:  # kept, ignored; a repeated name gets its column number
+            extras[j] = name if name not in extras.values() else f"{name}.{j + 1}"
             continue
         if key in found:
             other = fields[found[key][0]]
+            if normalize_header(other) == norm:
+                raise InputError(f"{path}: column '{name}' appears twice (also as '{other}')")
             raise InputError(f"{path}: columns '{other}' and '{name}' both give the {words}; keep one")
         found[key] = (j, unit)
     missing = [k for k in ("time_s", "run_id", "protocol", *_REQUIRED[1:]) if k not in found]
@@ -273,7 +272,6 @@ def _map_columns(path: Path, fields: list):
 
 def _parse_body(path: Path, body: str, delim: str, fields: list, found: dict, header_line: int):
     """Body text → DataFrame of the mapped columns (floats, run_id/protocol as text)."""
-    text_cols = {found["run_id"][0], found["protocol"][0]}
     numeric = {j for k, (j, _) in found.items() if k not in ("run_id", "protocol")}
     names = list(range(len(fields)))
     opts = dict(sep=delim, header=None, names=names, skip_blank_lines=False, skipinitialspace=True,
@@ -298,7 +296,20 @@ def _parse_body(path: Path, body: str, delim: str, fields: list, found: dict, he
     raise InputError(f"{path}: cannot parse as CSV")  # pragma: no cover
 
 
+def _text_codes(column: pd.Series):
+    """Text column → (codes, distinct values stripped): the string work is done once per value."""
+    codes, uniques = pd.factorize(column.fillna(""), use_na_sentinel=False)
+    return codes, np.array([str(u).strip() for u in uniques], dtype=object)
+
+
 def _oil_viscosity(spec, temperature_C: np.ndarray) -> np.ndarray:
+    """μ [Pa·s] of the spec's oil at ``temperature_C`` [°C], after checking the oil data."""
+    o = spec.oil
+    where = f"motor spec '{getattr(spec, 'name', '?')}' [oil]"
+    if not (np.isfinite(o.nu100_cSt) and 0 < o.nu100_cSt < o.nu40_cSt and np.isfinite(o.nu40_cSt)):
+        raise InputError(f"{where}: need 0 < nu100_cSt < nu40_cSt, got {o.nu100_cSt!r} and {o.nu40_cSt!r}")
+    if not (np.isfinite(o.density15_kg_m3) and o.density15_kg_m3 > 0):
+        raise InputError(f"{where}: density15_kg_m3 must be > 0, got {o.density15_kg_m3!r}")
     return np.asarray(spec.oil.viscosity(temperature_C), dtype=float)
 
 
@@ -325,32 +336,32 @@ def read_log(path, spec=None) -> pd.DataFrame:
     found, extras = _map_columns(path, fields)
     table = _parse_body(path, body, delim, fields, found, header_line)
     lines = header_line + 1 + np.arange(len(table))
-    empty_text = [table[found[k][0]].fillna("").astype(str).str.strip().eq("").to_numpy()
-                  for k in ("run_id", "protocol")]
-    blank = empty_text[0] & empty_text[1] & table[found["time_s"][0]].isna().to_numpy()
-    table, lines = table.loc[~blank].reset_index(drop=True), lines[~blank]
+    text = {k: _text_codes(table[found[k][0]]) for k in ("run_id", "protocol")}
+    empty = {k: (values == "")[codes] for k, (codes, values) in text.items()}
+    keep = ~(empty["run_id"] & empty["protocol"] & table[found["time_s"][0]].isna().to_numpy())  # blank lines
+    table, lines = table.loc[keep].reset_index(drop=True), lines[keep]
     if table.empty:
         raise InputError(f"{path}: no data rows after the header")
-
-    out = pd.DataFrame(index=table.index)
     for key in ("run_id", "protocol"):
-        j = found[key][0]
-        cells = table[j].fillna("").astype(str).str.strip()
-        empty = np.flatnonzero((cells == "").to_numpy())
-        if empty.size:
-            raise InputError(f"{path}: column '{fields[j]}', line {lines[empty[0]]}: empty cell")
-        out[key] = cells
-    proto = out["protocol"].str.lower().str.replace(r"[\s\-]+", "_", regex=True)
-    unknown = np.flatnonzero(~proto.isin(PROTOCOLS).to_numpy())
+        hole = np.flatnonzero(empty[key][keep])
+        if hole.size:
+            raise InputError(f"{path}: column '{fields[found[key][0]]}', line {lines[hole[0]]}: empty cell")
+    run_codes, run_values = text["run_id"][0][keep], text["run_id"][1]
+    proto_codes, proto_values = text["protocol"][0][keep], text["protocol"][1]
+    proto_norm = np.array([re.sub(r"[\s\-]+", "_", v.lower()) for v in proto_values], dtype=object)
+    unknown = np.flatnonzero(~np.isin(proto_norm, PROTOCOLS)[proto_codes])
     if unknown.size:
         i = unknown[0]
-        raise InputError(f"{path}: run '{out['run_id'].iloc[i]}', line {lines[i]}: unknown protocol "
-                         f"'{out['protocol'].iloc[i]}' (expected one of {', '.join(PROTOCOLS)})")
-    out["protocol"] = proto
-    per_run = out.groupby("run_id", sort=False)["protocol"].unique()
-    mixed = per_run[per_run.map(len) > 1]
+        raise InputError(f"{path}: run '{run_values[run_codes[i]]}', line {lines[i]}: unknown protocol "
+                         f"'{proto_values[proto_codes[i]]}' (expected one of {', '.join(PROTOCOLS)})")
+    pairs = pd.DataFrame({"run": run_codes, "protocol": pd.factorize(proto_norm[proto_codes])[0]})
+    pairs = pairs.drop_duplicates()
+    mixed = pairs["run"][pairs["run"].duplicated()]
     if len(mixed):
-        raise InputError(f"{path}: run '{mixed.index[0]}' has several protocols: {', '.join(mixed.iloc[0])}")
+        r = mixed.iloc[0]
+        names = sorted(set(proto_norm[proto_codes[run_codes == r]]))
+        raise InputError(f"{path}: run '{run_values[r]}' has several protocols: {', '.join(names)}")
+    out = pd.DataFrame({"run_id": run_values[run_codes].astype(str), "protocol": proto_norm[proto_codes].astype(str)})
 
     kinematic = None
     for si in FORMAT_COLUMNS:
@@ -360,6 +371,9 @@ def read_log(path, spec=None) -> pd.DataFrame:
         j, unit = found[si]
         x = table[j].to_numpy(dtype=float)
         x = np.where(np.isinf(x), np.nan, x)  # an overflowed sensor reads as missing
+        if si == "viscosity_Pa_s" and np.any(x <= 0):
+            i = int(np.flatnonzero(x <= 0)[0])
+            raise InputError(f"{path}: column '{fields[j]}', line {lines[i]}: viscosity must be > 0")
         conv = _BY_SI[si].units[unit]
         if isinstance(conv, tuple):  # kinematic viscosity, needs the oil density
             kinematic = (fields[j], x * conv[1])
@@ -396,9 +410,6 @@ def read_log(path, spec=None) -> pd.DataFrame:
     out["theta_rad"] = np.where(theta >= two_pi, 0.0, theta)
 
     mu = out["viscosity_Pa_s"].to_numpy()
-    if "viscosity_Pa_s" in found and kinematic is None and np.any(mu <= 0):
-        i = int(np.flatnonzero(mu <= 0)[0])
-        raise InputError(f"{path}: column '{col('viscosity_Pa_s')}', line {lines[i]}: viscosity must be > 0")
     oil = getattr(spec, "oil", None)
     if kinematic is not None:
         name, nu = kinematic
@@ -411,9 +422,9 @@ def read_log(path, spec=None) -> pd.DataFrame:
     gaps = np.isnan(mu)
     if gaps.any():
         if oil is None:
-            if "viscosity_Pa_s" not in found:
-                raise InputError(f"{path}: no viscosity column (e.g. 'viscosity_mPas') and no [oil] in the "
-                                 f"motor spec to derive it from '{col('oil_temp_C')}'")
+            if "viscosity_Pa_s" not in found or gaps.all():
+                raise InputError(f"{path}: no viscosity readings (column e.g. 'viscosity_mPas') and no [oil] in "
+                                 f"the motor spec to derive them from '{col('oil_temp_C')}'")
         else:
             mu = np.where(gaps, _oil_viscosity(spec, np.where(gaps, temp, 40.0)), mu)
     out["viscosity_Pa_s"] = mu

@@ -47,6 +47,11 @@ def si_frame(n=50, run="R1", protocol="constant_speed", seed=0):
     })
 
 
+def _insert(row, position, value):
+    fields = row.split(",")
+    return ",".join(fields[:position] + [value] + fields[position:])
+
+
 def one_line(exc_info):
     msg = str(exc_info.value)
     assert "\n" not in msg and msg.strip() == msg
@@ -103,10 +108,19 @@ def test_other_units_are_converted_to_si(tmp_path):
     assert list(f["operator"]) == ["ann", "ann"]  # extra column kept
 
 
-def test_rpm_degrees_fahrenheit_and_kinematic_viscosity(tmp_path):
-    header = HEADER.replace("oil_temp_C", "oil_temp_F").replace("viscosity_mPas", "viscosity_cSt")
-    rows = [r.replace(",45,30", ",113,40") for r in ROWS]
+def test_extra_columns_may_repeat_and_are_ignored(tmp_path):
+    f = logs.read_log(write(tmp_path, good_text(HEADER + ",note,note", [r + ",a,b" for r in ROWS])))
+    assert list(f["note"]) == ["a"] * len(ROWS) and list(f["note.16"]) == ["b"] * len(ROWS)
+    assert list(f.columns[: len(logs.SI_COLUMNS)]) == logs.SI_COLUMNS
+
+
+def test_rpm_degrees_fahrenheit_milliseconds_and_kinematic_viscosity(tmp_path):
+    header = (HEADER.replace("oil_temp_C", "oil_temp_F").replace("viscosity_mPas", "viscosity_cSt")
+              .replace("time_s", "Time (ms)").replace("p_case_bar", "p_case_mbar"))
+    rows = [r.replace(",45,30", ",113,40").replace(",1,", ",700,") for r in ROWS]
     f = logs.read_log(write(tmp_path, good_text(header, rows)), SPEC)
+    np.testing.assert_allclose(f["time_s"].iloc[:3], [0.0, 1e-4, 2e-4])
+    np.testing.assert_allclose(f["p_case_Pa"], 0.7e5)
     np.testing.assert_allclose(f["speed_rad_s"].iloc[0], 2 * np.pi)
     np.testing.assert_allclose(f["theta_rad"].iloc[1], np.radians(46))
     np.testing.assert_allclose(f["oil_temp_C"], 45.0)
@@ -250,6 +264,27 @@ def test_impossible_values_are_refused(tmp_path):
     assert "viscosity" in bad(tmp_path, good_text(rows=rows))
     rows = [r.replace(",45,30", ",-300,30") for r in ROWS]
     assert "absolute zero" in bad(tmp_path, good_text(rows=rows), "cold.csv")
+
+
+def test_impossible_oil_in_the_spec_is_refused(tmp_path):
+    header = HEADER.replace(",viscosity_mPas", "")
+    rows = [r.rsplit(",", 1)[0] for r in ROWS]
+    thick = MotorSpec("odd", pistons=9, displacement=80e-6, oil=OilSpec(nu40_cSt=5.0, nu100_cSt=46.0))
+    with pytest.raises(InputError) as exc:
+        logs.read_log(write(tmp_path, good_text(header, rows)), thick)
+    assert "'odd' [oil]" in one_line(exc) and "nu100_cSt" in str(exc.value)
+
+
+def test_cli_turns_a_bad_log_into_exit_status_2(tmp_path, capsys):
+    from motorid.cli import main
+
+    spec = tmp_path / "motor.toml"
+    spec.write_text(SPEC.to_toml())
+    log = write(tmp_path, good_text(HEADER.replace("torque_Nm", "torque_Nm,torque_kNm"),
+                                    [_insert(r, 6, "0.05") for r in ROWS]), "twotorques.csv")
+    assert main(["fit", str(log), "--motor", str(spec), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "twotorques.csv" in err and "torque_kNm" in err and "Traceback" not in err
 
 
 def test_ragged_row_is_a_parse_error_with_the_file_line(tmp_path):

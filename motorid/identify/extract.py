@@ -62,7 +62,8 @@ class ExtractSettings:
     rel_tol : smallest half-width of the steady band, relative to the settled level [-]
     speed_floor : smallest half-width of the speed band [rad/s]
     pressure_floor : smallest half-width of the pressure bands [Pa]
-    accel_window : Savitzky-Golay window of the acceleration [samples]
+    accel_window : window of the local quadratic fit giving the acceleration [samples]
+    stuck_turn : most the shaft angle may change before a breakaway, creep included [rad]
     """
 
     rest_speed: float = 2e-3
@@ -73,6 +74,7 @@ class ExtractSettings:
     speed_floor: float = 1e-3
     pressure_floor: float = 5e3
     accel_window: int = 9
+    stuck_turn: float = 0.2
 
 
 @dataclass
@@ -85,7 +87,7 @@ class Dataset:
     measured : channel → array aligned with ``running``: "torque" [N·m], "q_a",
         "q_b", "q_case" [m³/s]; NaN where the sensor had no reading
     run_of_sample : index of each running sample's run into ``runs`` [-]
-    frame_index : row of each running sample in the frame given to :func:`extract`
+    frame_index : position (``iloc``) of each running sample's row in the frame given to :func:`extract`
     runs : one row per run: run, protocol, file, n_samples, n_steady,
         speed_median_rad_s, dp_median_Pa (P_A − P_B), psum_median_Pa (P_A + P_B),
         temp_median_C, direction (±1, 0 where none), onset_time_s (startability),
@@ -212,11 +214,12 @@ def steady_state_mask(speed, dp, psum, settings: ExtractSettings = ExtractSettin
 
 
 def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
-    """dω/dt of one run by a Savitzky-Golay derivative (quadratic) [rad/s²].
+    """dω/dt of one run by a local quadratic fit of speed against time [rad/s²].
 
-    time [s], speed [rad/s] (NaN gaps are bridged).  Uneven sampling: the speed is
-    smoothed the same way and differentiated against time.  Zero where the run
-    is too short to tell.
+    time [s], speed [rad/s] (NaN gaps are bridged).  Each sample's slope comes
+    from a least-squares quadratic through the ``window`` samples around it (a
+    Savitzky-Golay derivative when the sampling is even; uneven sampling is
+    honoured).  Zero where the run is too short to tell.
     """
     t = np.asarray(time, dtype=float)
     w = np.asarray(speed, dtype=float)
@@ -226,12 +229,18 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
         return np.zeros(n)
     if not ok.all():
         w = np.interp(t, t[ok], w[ok])
-    win = _odd(min(max(window, 5), n))
+    k = _odd(min(max(window, 5), n))
     dt = np.diff(t)
-    step = float(np.median(dt))
-    if dt.max() <= 1.5 * step and dt.min() >= step / 1.5:
-        return savgol_filter(w, win, 2, deriv=1, delta=step)
-    return np.gradient(savgol_filter(w, win, 2), t)
+    scale = float(np.median(dt))
+    if np.ptp(dt) <= 1e-6 * scale:  # even sampling: the same fit, by convolution
+        return savgol_filter(w, k, 2, deriv=1, delta=scale, mode="interp")
+    first = np.clip(np.arange(n) - k // 2, 0, n - k)  # windows shift inwards at the ends
+    idx = first[:, None] + np.arange(k)[None, :]
+    x = (t[idx] - t[:, None]) / scale
+    powers = x[:, :, None] ** np.arange(3)[None, None, :]  # (n, k, 3): 1, x, x²
+    normal = np.einsum("nkp,nkq->npq", powers, powers)
+    rhs = np.einsum("nkp,nk->np", powers, w[idx])
+    return np.linalg.solve(normal, rhs[..., None])[:, 1, 0] / scale
 
 
 # ----------------------------------------------------------------- breakaway
@@ -328,15 +337,16 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3) -> Breakaway:
     for _ in range(5):
         base, noise = _rest_level(t[:stuck_end], w[:stuck_end], line, floor)
         r = w - base(t)
+        moving = max(10.0 * noise, rest_speed)
         up, down = _sustained(r, 3), _sustained(-r, 3)
-        direction = 1.0 if up.max() >= down.max() else -1.0
+        if max(up.max(), down.max()) < moving:
+            raise NoBreakaway(f"speed never left rest (largest sustained departure "
+                              f"{max(up.max(), down.max()):.3g} rad/s, rest noise {noise:.3g} rad/s)")
+        first = [int(np.argmax(x >= moving)) if x.max() >= moving else n for x in (up, down)]
+        direction = 1.0 if first[0] <= first[1] else -1.0  # the first sustained departure
         lasting = up if direction > 0 else down
         dev = direction * r
-        moving = max(10.0 * noise, rest_speed)
-        if lasting.max() < moving:
-            raise NoBreakaway(f"speed never left rest (largest sustained departure {lasting.max():.3g} rad/s, "
-                              f"rest noise {noise:.3g} rad/s)")
-        first_moving = int(np.argmax(lasting >= moving))
+        first_moving = min(first)
         at_rest = np.flatnonzero(np.abs(r[:first_moving + 1]) <= max(3.0 * noise, 0.1 * moving))
         if first_moving < 3 or at_rest.size == 0:
             raise NoBreakaway("the shaft is already turning at the start of the run")
@@ -391,7 +401,11 @@ def _check_spec(spec) -> None:
         raise InputError(f"motor spec: expected a MotorSpec, got {type(spec).__name__}")
     if not (isinstance(spec.pistons, (int, np.integer)) and spec.pistons >= 2):
         raise InputError(f"motor spec '{spec.name}': pistons must be an integer >= 2, got {spec.pistons!r}")
-    if not (math.isfinite(spec.displacement) and spec.displacement > 0):
+    try:
+        displacement = float(spec.displacement)
+    except (TypeError, ValueError):
+        displacement = math.nan
+    if not (math.isfinite(displacement) and displacement > 0):
         raise InputError(f"motor spec '{spec.name}': displacement must be > 0, got {spec.displacement!r}")
 
 
@@ -401,7 +415,7 @@ def _median(x) -> float:
 
 
 def _running_run(key, cols, settings, excluded, notes):
-    """Steady samples of one running run → (positions, acceleration, direction, n_steady)."""
+    """Steady samples of one running run → (their positions in the run or None, direction, why not)."""
     n = cols["time_s"].size
     if n < settings.min_samples:
         excluded[SHORT_RUN] = excluded.get(SHORT_RUN, 0) + 1
@@ -435,20 +449,34 @@ def _running_run(key, cols, settings, excluded, notes):
 
 
 def _startability_run(key, cols, settings, excluded, notes):
-    """Breakaway event of one startability run → dict of the event, or None."""
+    """Breakaway event of one startability run → (dict of the event or None, why not)."""
     t = cols["time_s"]
     if t.size < settings.min_samples:
         excluded[SHORT_RUN] = excluded.get(SHORT_RUN, 0) + 1
-        excluded[NO_BREAKAWAY] = excluded.get(NO_BREAKAWAY, 0) + 1
         notes.append(f"run {key}: only {t.size} samples (at least {settings.min_samples} needed)")
         return None, "too few samples"
+
+    def turned(before: float) -> float:  # how far the shaft angle moved before a time [rad]
+        theta = cols["theta_rad"][t < before]
+        theta = np.unwrap(theta[np.isfinite(theta)])
+        return float(np.ptp(theta)) if theta.size else 0.0
+
     try:
-        b = find_breakaway(t, cols["speed_rad_s"], settings.rest_speed)
+        try:
+            b = find_breakaway(t, cols["speed_rad_s"], settings.rest_speed)
+        except NoBreakaway:
+            if turned(t[-1] + 1.0) <= settings.stuck_turn:
+                raise
+            b = None
+        if b is None or turned(b.onset_time) > settings.stuck_turn:
+            end = t[-1] + 1.0 if b is None else b.onset_time
+            raise NoBreakaway(f"the shaft is already turning at the start of the run (the shaft angle moved "
+                              f"{turned(end):.3g} rad while the speed seemed at rest)")
+        stuck = np.flatnonzero(t < b.onset_time)
     except NoBreakaway as exc:
         excluded[NO_BREAKAWAY] = excluded.get(NO_BREAKAWAY, 0) + 1
         notes.append(f"run {key}: no breakaway found, {exc}")
         return None, "no breakaway found"
-    stuck = np.flatnonzero(t < b.onset_time)
     count = int(np.clip(stuck.size // 4, 8, 50))
     window = stuck[-count:]
     event = {"onset": b.onset_time, "direction": b.direction}
@@ -562,5 +590,5 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
         running=running, measured=measured, run_of_sample=run_of_sample_arr, frame_index=index, runs=runs,
         events=event_samples, held_torque=ev("held"), event_runs=[e["run"] for e in events],
         run_of_event=np.array([e["run_index"] for e in events], dtype=int), onset_time=ev("onset"),
-        excluded=excluded, notes=notes)
+        excluded={k: v for k, v in excluded.items() if v}, notes=notes)
 
