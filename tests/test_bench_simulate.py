@@ -411,3 +411,31 @@ def test_mechanisms_enter_through_the_model(tmp_path):
         assert held[0] < r.plan.load_torque <= held[1], r.run_id
         dp = abs(g["p_a_Pa"].iloc[k] - g["p_b_Pa"].iloc[k])
         assert dp > breakaway_pressure(r.plan.shaft_angle, r.plan.load_torque, 7e5) + 2.0 * BAR
+
+
+def test_every_catalog_mechanism_round_trips_through_a_truth_file():
+    catalog = pytest.importorskip("motorid.discrepancy.catalog")
+    protos = [protocol("cp"), parse_protocol(tomllib.loads(PROTOCOLS["st"].replace(
+        "load_torque_Nm = [0.0, 60.0, 200.0]", "load_torque_Nm = [60.0]").replace(
+        "[0.0, 7.0, 14.0, 21.0, 28.0, 35.0, 42.0]", "[0.0, 21.0]")), "st.toml"), protocol("ct")]
+    for mech in catalog.all_mechanisms():
+        table = {name.split(".", 1)[1]: info.typical for name, info in mech.parameters.items()}
+        truth = parse_truth({"parameters": TRUTH.params, "mechanisms": {mech.id: table}}, "truth.toml")
+        assert [m.id for m in truth.mechanisms] == [mech.id]
+        camp = simulate_campaign(protos, SPEC, truth, seed=2, ideal_sensors=True)
+        true = camp.true_frame
+        moving = true["moving"].to_numpy()
+        ch = model_channels(true, true["acceleration_rad_s2"].to_numpy(), truth)
+        for name, col in (("torque", "torque_Nm"), ("q_a", "q_a_m3_s"), ("q_case", "q_case_m3_s")):
+            np.testing.assert_allclose(np.asarray(getattr(ch, name))[moving], true[col][moving], rtol=1e-9,
+                                       atol=1e-11 * np.abs(true[col]).max(), err_msg=f"{mech.id} {name}")
+        for r in (r for r in camp.runs if r.procedure == "startability"):
+            g = true[true["run_id"] == r.run_id]
+            k = int(np.argmax(g["moving"].to_numpy()))
+            ev = model.make_samples(SPEC, r.plan.shaft_angle, 0.0, g["p_a_Pa"].iloc[k - 1:k + 1],
+                                    g["p_b_Pa"].iloc[k - 1:k + 1], g["p_case_Pa"].iloc[k - 1:k + 1],
+                                    g["viscosity_Pa_s"].iloc[k - 1:k + 1], direction=r.plan.direction,
+                                    temperature=g["oil_temp_C"].iloc[k - 1:k + 1],
+                                    time=g["time_s"].iloc[k - 1:k + 1])
+            held = r.plan.direction * np.asarray(model.predict_breakaway(truth.params, SPEC, ev, truth.mechanisms))
+            assert held[0] < r.plan.load_torque <= held[1] + 1e-9, (mech.id, r.run_id)

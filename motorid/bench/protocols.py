@@ -28,6 +28,7 @@ Schema (keys marked * are required; the procedure decides which apply)::
     sample_rate_Hz* = 100                    # or a list aligned with speed_rpm / flow_lpm
     duration_s = 2.0                         # least logged time of a running set point
     revolutions = 1.0                        # least shaft revolutions of a running set point
+                                             #   (default 1 for constant_speed, else 0)
     settle_s = 1.0                           # constant_flow/torque: simulated, not logged
     ramp_rate_bar_s = 2.5                    # startability: inlet pressure ramp
     hold_s = 0.5                             # startability: logged before the ramp
@@ -65,7 +66,7 @@ from __future__ import annotations
 import itertools
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from motorid.bench.sensors import Sensors, parse_sensors
@@ -273,69 +274,63 @@ def _sample_rates(timing: dict, where: str, procedure: str, set_points: dict) ->
     return rates * (len(set_points[aligned]) if aligned else 1)
 
 
+# TOML key → (field, factor to SI, low, low open, high) of each settings table
+_TIMING_KEYS = {
+    "duration_s": ("duration", 1.0, 0.0, True, 1e5),
+    "revolutions": ("revolutions", 1.0, 0.0, False, 1e4),
+    "settle_s": ("settle", 1.0, 0.0, False, 100.0),
+    "ramp_rate_bar_s": ("ramp_rate", BAR, 0.0, True, 1e4),
+    "hold_s": ("hold", 1.0, 0.0, False, 1e4),
+    "after_breakaway_s": ("after_breakaway", 1.0, 0.0, True, 1e3),
+    "max_pressure_bar": ("max_pressure", BAR, 0.0, True, 2000.0),
+    "start_pressure_bar": ("start_pressure", BAR, 0.0, False, 2000.0),
+}
+_CONDITIONS_KEYS = {
+    "back_pressure_bar": ("back_pressure", BAR, 0.0, False, 100.0),
+    "case_pressure_bar": ("case_pressure", BAR, 0.0, False, 20.0),
+    "case_drain_resistance_bar_per_lpm": ("case_drain_resistance", BAR / LPM, 0.0, False, 10.0),
+    "temp_drift_C_per_min": ("temp_drift", 1.0 / 60.0, -10.0, False, 10.0),
+    "temp_tolerance_C": ("temp_tolerance", 1.0, 0.0, False, 10.0),
+}
+_DYNAMOMETER_KEYS = {
+    "speed_ripple": ("speed_ripple", 1.0, 0.0, False, 0.2),
+    "speed_ripple_Hz": ("speed_ripple_freq", 1.0, 0.0, False, 1e4),
+    "speed_ripple_per_rev": ("speed_ripple_per_rev", 1.0, 0.0, False, 0.2),
+    "load_inertia_kg_m2": ("load_inertia", 1.0, 0.0, False, 1e4),
+    "max_speed_rpm": ("max_speed", RPM, 0.0, True, 20000.0),
+}
+_SUPPLY_KEYS = {
+    "pressure_ripple": ("pressure_ripple", 1.0, 0.0, False, 0.2),
+    "pressure_ripple_Hz": ("pressure_ripple_freq", 1.0, 0.0, False, 1e4),
+    "flow_ripple": ("flow_ripple", 1.0, 0.0, False, 0.2),
+    "flow_ripple_Hz": ("flow_ripple_freq", 1.0, 0.0, False, 1e4),
+    "volume_L": ("volume", 1e-3, 0.0, True, 1e4),
+    "bulk_modulus_bar": ("bulk_modulus", BAR, 0.0, True, 1e6),
+}
+
+
+def _parse_settings(table: dict, where: str, cls, keys: dict, allowed=None, why: str = ""):
+    """A settings dataclass from a TOML table: each key converted to SI, absent keys
+    keep the dataclass default."""
+    _check_keys(table, list(keys) if allowed is None else allowed, where, why)
+    values = {}
+    for key, (attr, factor, low, low_open, high) in keys.items():
+        value = _number(table, key, where, required=False, low=low, low_open=low_open, high=high)
+        if value is not None:
+            values[attr] = value * factor
+    return cls(**values)
+
+
 def _parse_timing(t: dict, where: str, procedure: str) -> Timing:
-    opt = dict(required=False)
-    num = lambda key, default, **kw: _number(t, key, where, **opt, default=default, **kw)  # noqa: E731
-    start = num("start_pressure_bar", None, low=0.0, low_open=False, high=2000.0)
-    timing = Timing(
-        duration=num("duration_s", 2.0, low=0.0, high=1e5),
-        revolutions=num("revolutions", 1.0 if procedure == "constant_speed" else 0.0,
-                        low=0.0, low_open=False, high=1e4),
-        settle=num("settle_s", 1.0, low=0.0, low_open=False, high=100.0),
-        ramp_rate=num("ramp_rate_bar_s", 2.5, low=0.0, high=1e4) * BAR,
-        hold=num("hold_s", 0.5, low=0.0, low_open=False, high=1e4),
-        after_breakaway=num("after_breakaway_s", 1.0, low=0.0, high=1e3),
-        max_pressure=num("max_pressure_bar", 400.0, low=0.0, high=2000.0) * BAR,
-        start_pressure=None if start is None else start * BAR,
-    )
+    allowed = _TIMING[procedure]
+    timing = _parse_settings({k: v for k, v in t.items() if k != "sample_rate_Hz"}, where, Timing,
+                             {k: v for k, v in _TIMING_KEYS.items() if k in allowed}, allowed,
+                             f" for procedure {procedure}")
+    if procedure == "constant_speed" and "revolutions" not in t:
+        timing = replace(timing, revolutions=1.0)  # a full revolution unless told otherwise
     if timing.start_pressure is not None and timing.start_pressure >= timing.max_pressure:
         raise InputError(f"{where}: key 'start_pressure_bar' must be below 'max_pressure_bar'")
     return timing
-
-
-def _parse_conditions(c: dict, where: str) -> Conditions:
-    _check_keys(c, ("back_pressure_bar", "case_pressure_bar", "case_drain_resistance_bar_per_lpm",
-                    "temp_drift_C_per_min", "temp_tolerance_C"), where)
-    opt = dict(required=False, low=0.0, low_open=False)
-    return Conditions(
-        back_pressure=_number(c, "back_pressure_bar", where, default=7.0, high=100.0, **opt) * BAR,
-        case_pressure=_number(c, "case_pressure_bar", where, default=0.7, high=20.0, **opt) * BAR,
-        case_drain_resistance=_number(c, "case_drain_resistance_bar_per_lpm", where, default=0.05,
-                                      high=10.0, **opt) * BAR / LPM,
-        temp_drift=_number(c, "temp_drift_C_per_min", where, required=False, default=0.2,
-                           low=-10.0, low_open=False, high=10.0) / 60.0,
-        temp_tolerance=_number(c, "temp_tolerance_C", where, default=0.5, high=10.0, **opt),
-    )
-
-
-def _parse_dynamometer(d: dict, where: str) -> Dynamometer:
-    _check_keys(d, ("speed_ripple", "speed_ripple_Hz", "speed_ripple_per_rev", "load_inertia_kg_m2",
-                    "max_speed_rpm"), where)
-    opt = dict(required=False, low=0.0, low_open=False)
-    dyn = Dynamometer(
-        speed_ripple=_number(d, "speed_ripple", where, default=0.002, high=0.2, **opt),
-        speed_ripple_freq=_number(d, "speed_ripple_Hz", where, default=1.5, high=1e4, **opt),
-        speed_ripple_per_rev=_number(d, "speed_ripple_per_rev", where, default=0.001, high=0.2, **opt),
-        load_inertia=_number(d, "load_inertia_kg_m2", where, default=0.5, high=1e4, **opt),
-        max_speed=_number(d, "max_speed_rpm", where, required=False, default=10.0, low=0.0,
-                          high=20000.0) * RPM,
-    )
-    return dyn
-
-
-def _parse_supply(s: dict, where: str) -> Supply:
-    _check_keys(s, ("pressure_ripple", "pressure_ripple_Hz", "flow_ripple", "flow_ripple_Hz",
-                    "volume_L", "bulk_modulus_bar"), where)
-    opt = dict(required=False, low=0.0, low_open=False)
-    return Supply(
-        pressure_ripple=_number(s, "pressure_ripple", where, default=5e-4, high=0.2, **opt),
-        pressure_ripple_freq=_number(s, "pressure_ripple_Hz", where, default=3.0, high=1e4, **opt),
-        flow_ripple=_number(s, "flow_ripple", where, default=0.002, high=0.2, **opt),
-        flow_ripple_freq=_number(s, "flow_ripple_Hz", where, default=5.0, high=1e4, **opt),
-        volume=_number(s, "volume_L", where, required=False, default=1.0, low=0.0, high=1e4) * 1e-3,
-        bulk_modulus=_number(s, "bulk_modulus_bar", where, required=False, default=14000.0,
-                             low=0.0, high=1e6) * BAR,
-    )
 
 
 def _expected_samples(procedure: str, plan: RunPlan, timing: Timing) -> float:
@@ -386,7 +381,6 @@ def parse_protocol(data: dict, source: str = "protocol", name: str | None = None
 
     tt = _table(data, "timing", source)
     tw = f"{source} [timing]"
-    _check_keys(tt, _TIMING[procedure], tw, f" for procedure {procedure}")
     timing = _parse_timing(tt, tw, procedure)
     rates = _sample_rates(tt, tw, procedure, set_points)
 
@@ -412,9 +406,11 @@ def parse_protocol(data: dict, source: str = "protocol", name: str | None = None
         standard=standard.strip(),
         runs=tuple(runs),
         timing=timing,
-        conditions=_parse_conditions(_table(data, "conditions", source), f"{source} [conditions]"),
-        dynamometer=_parse_dynamometer(_table(data, "dynamometer", source), f"{source} [dynamometer]"),
-        supply=_parse_supply(_table(data, "supply", source), f"{source} [supply]"),
+        conditions=_parse_settings(_table(data, "conditions", source), f"{source} [conditions]", Conditions,
+                                   _CONDITIONS_KEYS),
+        dynamometer=_parse_settings(_table(data, "dynamometer", source), f"{source} [dynamometer]",
+                                    Dynamometer, _DYNAMOMETER_KEYS),
+        supply=_parse_settings(_table(data, "supply", source), f"{source} [supply]", Supply, _SUPPLY_KEYS),
         sensors=parse_sensors(data.get("sensors"), source),
         title=head.get("title", ""),
         description=head.get("description", ""),

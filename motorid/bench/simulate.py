@@ -171,7 +171,7 @@ def _speed_held(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn) -
 
 # ---------------------------------------------------------------- load-driven runs (shared)
 
-def _drive(protocol: Protocol, plans, rngs, spec: MotorSpec) -> tuple[dict, np.ndarray]:
+def _drive(protocol: Protocol, plans, rngs) -> tuple[dict, np.ndarray]:
     """Per-run drive arrays (dynamics.DRIVE_FIELDS) and the process random draws."""
     cond, dyn, sup, tim = protocol.conditions, protocol.dynamometer, protocol.supply, protocol.timing
     R = len(plans)
@@ -208,14 +208,16 @@ def _per_sample(drive: dict, counts) -> dict:
     return {k: np.repeat(v, counts) for k, v in drive.items()}
 
 
-def _held_load(truth: Truth, spec: MotorSpec, drive: dict, theta, dp, t, direction):
+def _held_load(truth: Truth, spec: MotorSpec, drive: dict, theta, dp, t, direction, drain_resistance: float):
     """predict_breakaway: the load torque held at breakaway in ``direction`` [N·m],
-    at shaft angle theta [rad], ΔP magnitude dp [Pa] and time t [s] of each sample."""
+    at shaft angle theta [rad], ΔP magnitude dp [Pa] and time t [s] of each sample
+    (the case pressure rises with the standstill case drain flow, as logged)."""
     t = np.broadcast_to(t, np.shape(theta))
     p_a, p_b = dynamics.port_pressures(drive["direction"], drive["p_out"] + dp, drive["p_out"], xp=np)
     cols = {"theta_rad": theta, "speed_rad_s": 0.0, "p_a_Pa": p_a, "p_b_Pa": p_b, "p_case_Pa": drive["p_case"],
             "direction": direction, "oil_temp_C": dynamics.oil_temperature(drive, t), "time_s": t}
-    return evaluate("held", truth, spec, _oil(truth, spec, cols))["held_Nm"]
+    cols = _case_pressure(truth, spec, _oil(truth, spec, cols), drain_resistance)
+    return evaluate("held", truth, spec, _sample_columns(cols))["held_Nm"]
 
 
 def _load_driven_channels(truth: Truth, spec: MotorSpec, drive_s: dict, cols: dict, drain_resistance: float):
@@ -231,8 +233,7 @@ def _load_driven_channels(truth: Truth, spec: MotorSpec, drive_s: dict, cols: di
                                                    "load_inertia": drive_s["load_inertia"]})["acceleration_rad_s2"]
     d, speed = drive_s["direction"], cols["speed_rad_s"]
     at_limit = (d * speed >= drive_s["max_speed"] * (1.0 - 1e-12)) & (d * alpha > 0.0)
-    stalled = cols["moving"] & (speed == 0.0) & (d * alpha <= 0.0)
-    cols["moving"] = cols["moving"] & ~stalled
+    cols["moving"] = cols["moving"] & (speed != 0.0)  # at rest (stalled after breakaway): held by friction
     cols["acceleration_rad_s2"] = np.where(at_limit | ~cols["moving"], 0.0, alpha)
     cols = _running_channels(truth, spec, cols)
     cols["torque_Nm"] = np.where(cols["moving"], cols["torque_Nm"], drive_s["load_torque"])
@@ -251,9 +252,10 @@ def _first_crossing(values, counts):
 
 
 def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn) -> tuple[list, list]:
-    plans, tim, dyn = protocol.runs, protocol.timing, protocol.dynamometer
+    plans, tim = protocol.runs, protocol.timing
     R = len(plans)
-    drive, _ = _drive(protocol, plans, rngs, spec)
+    drive, _ = _drive(protocol, plans, rngs)
+    drain = protocol.conditions.case_drain_resistance
     d, load = drive["direction"], np.abs(drive["load_torque"])
     theta_set = np.array([p.shaft_angle for p in plans])
     fs = plans[0].sample_rate
@@ -264,8 +266,8 @@ def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn)
     counts_g = np.full(R, grid.size)
     dg = _per_sample(drive, counts_g)
     dp_g, th_g = np.tile(grid, R), np.repeat(theta_set, grid.size)
-    fwd = _held_load(truth, spec, dg, th_g, dp_g, 0.0, dg["direction"])
-    bwd = _held_load(truth, spec, dg, th_g, dp_g, 0.0, -dg["direction"])
+    fwd = _held_load(truth, spec, dg, th_g, dp_g, 0.0, dg["direction"], drain)
+    bwd = _held_load(truth, spec, dg, th_g, dp_g, 0.0, -dg["direction"], drain)
     balance = dg["direction"] * 0.5 * (fwd + bwd) - np.repeat(load, grid.size)
     start = np.empty(R)
     for r, (j, block) in enumerate(zip(_first_crossing(balance, counts_g), _split({"b": balance}, counts_g))):
@@ -273,7 +275,7 @@ def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn)
         start[r] = grid[0] if j == 0 else (grid[-1] if j < 0 else
                                           np.interp(0.0, [b[j - 1], b[j]], [grid[j - 1], grid[j]]))
     if tim.start_pressure is not None:
-        held_back = d * _held_load(truth, spec, drive, theta_set, np.full(R, tim.start_pressure), 0.0, -d)
+        held_back = d * _held_load(truth, spec, drive, theta_set, np.full(R, tim.start_pressure), 0.0, -d, drain)
         slips = held_back < load
         for r in np.flatnonzero(slips):
             warn(f"run {protocol.name}-{r + 1:03d}: the load overhauls the motor at start_pressure_bar; "
@@ -288,7 +290,7 @@ def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn)
     t_daq = np.concatenate([np.arange(n) / fs for n in counts])
     ds = _per_sample(drive, counts)
     cond = ds["direction"] * _held_load(truth, spec, ds, np.repeat(theta_set, counts),
-                                        dynamics.ramp_pressure(ds, t_daq, xp=np), t_daq, ds["direction"]) \
+                                        dynamics.ramp_pressure(ds, t_daq, xp=np), t_daq, ds["direction"], drain) \
         - np.repeat(load, counts)
     first = _first_crossing(cond, counts)
     t_break = np.full(R, np.nan)
@@ -300,7 +302,7 @@ def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn)
         t_sub = (lo[:, None] + np.linspace(0.0, 1.0 / fs, sub)[None, :]).ravel()
         dr = _per_sample({k: v[refine] for k, v in drive.items()}, np.full(refine.size, sub))
         c = (dr["direction"] * _held_load(truth, spec, dr, np.repeat(theta_set[refine], sub),
-                                          dynamics.ramp_pressure(dr, t_sub, xp=np), t_sub, dr["direction"])
+                                          dynamics.ramp_pressure(dr, t_sub, xp=np), t_sub, dr["direction"], drain)
              - np.repeat(load[refine], sub)).reshape(-1, sub)
         t_sub = t_sub.reshape(-1, sub)
         for i, r in enumerate(refine):
@@ -340,7 +342,7 @@ def _startability(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn)
     cols, counts = _concat(pieces)
     ds = _per_sample(drive, counts)
     cols["p_in"] = ds["p_out"] + dynamics.ramp_pressure(ds, cols["time_s"], xp=np)
-    cols = _load_driven_channels(truth, spec, ds, cols, protocol.conditions.case_drain_resistance)
+    cols = _load_driven_channels(truth, spec, ds, cols, drain)
     return _split(cols, counts), [None if not broke[r] else float(t_break[r]) for r in range(R)]
 
 
@@ -372,7 +374,7 @@ def _steady_state(truth: Truth, spec: MotorSpec, drive: dict, theta0, iterations
 def _flow_fed(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn) -> tuple[list, list]:
     plans, tim = protocol.runs, protocol.timing
     R = len(plans)
-    drive, draws = _drive(protocol, plans, rngs, spec)
+    drive, draws = _drive(protocol, plans, rngs)
     theta0 = draws[:, 0]
     speed, dp = _steady_state(truth, spec, drive, theta0)
     durations = np.array([running_duration(p, tim, speed=s) for p, s in zip(plans, speed)])

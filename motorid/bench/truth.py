@@ -56,6 +56,8 @@ def resolve_mechanism(mech_id: str, where: str):
         raise InputError(f"{where}: unknown mechanism '{mech_id}' (no discrepancy catalog is installed)") from None
     try:
         mech = catalog.get(mech_id)
+    except InputError as exc:  # the catalog's own words (it names the known mechanisms)
+        raise InputError(f"{where}: {exc}") from None
     except (KeyError, LookupError, ValueError):
         mech = None
     if mech is None:
