@@ -89,6 +89,9 @@ def write_log(frame: pd.DataFrame, path, full_precision: bool = False) -> Path:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes files private; a log is not
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
