@@ -328,9 +328,12 @@ class _Problem:
             self.cell_run = np.zeros(self.n_cells, int)
             self.cell_run[self.cell_of] = self.run_of
             self.cell_size = bucket(self.n_cells)
+            # cell means; θ wrapped first (a bin never straddles the wrap), so that
+            # samples of one bin from different revolutions average to that bin
+            fields = data.running._replace(theta=theta)
             self.cell_samples = pad_samples(Samples(*[
                 np.bincount(self.cell_of, weights=np.asarray(f, dtype=float), minlength=self.n_cells) / counts
-                for f in data.running
+                for f in fields
             ]), self.cell_size)
             self.n_samples = int(self.run_of.size)
             self.running_padded = pad_samples(data.running, bucket(self.n_samples))
