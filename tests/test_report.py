@@ -247,6 +247,27 @@ def test_discrepancy_section_renders_diagnosis(fitted, tmp_path):
     assert "Not run" not in section
 
 
+def test_report_says_what_the_logs_cannot_identify(tmp_path):
+    """No startability runs, no sampler: K_FS and K_s get no number, and no figure rests on them."""
+    from motorid.identify.least_squares import fit_least_squares
+    from motorid.identify.pipeline import Identification
+    from motorid.identify.results import result_document, write_json_atomic
+
+    spec, ds = synthetic_dataset(seed=1, n=60)
+    ds.events, ds.held_torque, ds.event_runs = None, np.zeros(0), []
+    ds.runs = ds.runs[ds.runs.protocol != "startability"].reset_index(drop=True)
+    ls = fit_least_squares(ds, spec)
+    write_json_atomic(result_document(ls, spec, ds, None, {"logs": [], "motor": ""}), tmp_path / "result.json")
+    text = write_report(tmp_path, identification=Identification(ls, None, ds, None, 1.0, {}),
+                        spec=spec).read_text(encoding="utf-8")
+    doc = json.loads((tmp_path / "result.json").read_text())
+    check_report_matches(text, doc)
+    assert "7 of 9 parameters identified (KFS, Ks not identifiable from these logs)" in text
+    assert "no Bayesian run" in text and "No posterior" in text
+    assert "No starting torque efficiency: KFS, Ks cannot be identified" in text
+    assert "no startability breakaway found" in text  # the reason, in the table
+
+
 def test_numbers_and_verdicts_in_words():
     assert fmt.number(4.99984e-14) == "5.000×10<sup>−14</sup>"
     assert fmt.number(3.00077) == "3.001" and fmt.number(5002.24) == "5002" and fmt.number(0.0029993) == "0.002999"

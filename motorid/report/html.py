@@ -143,9 +143,11 @@ def _figures(rd: ReportData, ens) -> dict:
             "breakaway": lambda: plots.plot_breakaway(rd, ens),
             "flows": lambda: plots.plot_flows_speed(rd, ens),
             "residuals": lambda: plots.plot_residuals(rd),
-            "efficiency": lambda: plots.plot_efficiency_maps(rd, ens),
-            "starting": lambda: plots.plot_starting_efficiency(rd, ens),
         })
+        if not _unidentified(rd.doc, EFFICIENCY_NEEDS):
+            jobs["efficiency"] = lambda: plots.plot_efficiency_maps(rd, ens)
+        if not _unidentified(rd.doc, STARTING_NEEDS):
+            jobs["starting"] = lambda: plots.plot_starting_efficiency(rd, ens)
     out = {}
     for key, job in jobs.items():
         try:
@@ -542,6 +544,20 @@ def _chain_diagnostics(rd: ReportData) -> str:
     return f'<p class="verdict" id="chain-verdict">{esc(chain_verdict(m))}</p>' + facts + table
 
 
+EFFICIENCY_NEEDS = ("Kv", "KF", "TFc", "KL0", "KAB")
+STARTING_NEEDS = ("KF", "KFS", "TFc", "Ks")
+
+
+def _unidentified(doc: dict, names) -> list:
+    params = doc.get("parameters", {})
+    return [k for k in names if k in params and not params[k].get("identifiable")]
+
+
+def _not_identified(doc: dict, names, what: str) -> str:
+    return (f"No {what}: {', '.join(_unidentified(doc, names))} cannot be identified from these logs, and a "
+            "figure built on default values would say nothing about this motor.")
+
+
 def _efficiency(rd: ReportData, figs: dict) -> str:
     body = []
     f = figs.get("efficiency")
@@ -556,22 +572,20 @@ def _efficiency(rd: ReportData, figs: dict) -> str:
                f"η_t {t:.4f}.")
     else:
         cap = ""
-    body.append("<h3>Efficiency maps</h3>" + _figure(f, cap, "No running data to anchor the maps."))
+    missing = (_not_identified(rd.doc, EFFICIENCY_NEEDS, "efficiency maps")
+               if _unidentified(rd.doc, EFFICIENCY_NEEDS) else "No running data to anchor the maps.")
+    body.append("<h3>Efficiency maps</h3>" + _figure(f, cap, missing))
     f = figs.get("starting")
-    params = rd.doc.get("parameters", {})
-    unsure = [k for k in ("KFS", "Ks") if k in params and not params[k].get("identifiable")]
+    cap = ""
     if f:
         x, mean, worst = f.facts["point"]
         cap = ("Starting torque efficiency (ISO 4392-2): the torque the motor can hold against a load at the "
                "instant it breaks away, over the ideal torque D|ΔP|/2π; the mean over the shaft angle and the "
                f"worst angle, with their 95 % bands; points: the breakaway events. At {x:.0f} bar: mean "
                f"{mean:.4f}, worst {worst:.4f}.")
-        if unsure:
-            cap += (f" {', '.join(unsure)} could not be identified: the curves use their default values "
-                    "and say nothing about this motor.")
-    else:
-        cap = ""
-    body.append("<h3>Starting torque efficiency</h3>" + _figure(f, cap, "No data to compute it from."))
+    missing = (_not_identified(rd.doc, STARTING_NEEDS, "starting torque efficiency")
+               if _unidentified(rd.doc, STARTING_NEEDS) else "No data to compute it from.")
+    body.append("<h3>Starting torque efficiency</h3>" + _figure(f, cap, missing))
     return _section("efficiency", "\n".join(body))
 
 
