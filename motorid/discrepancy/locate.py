@@ -176,7 +176,7 @@ def _degc(v):
     return f"{v:.3g} °C"
 
 
-def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.1,
+def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
            max_order: int | None = None) -> Location:
     """Test every channel's residuals for structure against its noise level.
 
@@ -296,8 +296,10 @@ def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec) -> list:
             for k in range(1, kmax + 1):
                 if step * k > 2 * np.pi / 6:
                     break
+                # with an intercept: a run's offset is not angle structure
                 X = np.column_stack([np.cos(k * th), np.sin(k * th)])
-                beta, *_ = np.linalg.lstsq(X, zr, rcond=None)
+                X = X - X.mean(axis=0)
+                beta, *_ = np.linalg.lstsq(X, zr - zr.mean(), rcond=None)
                 fit = X @ beta
                 stat_k[k] += np.sum(fit**2) / inflate
                 dof_k[k] += 2

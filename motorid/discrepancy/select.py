@@ -90,12 +90,33 @@ def _held_out_chi2(dataset, spec, mechanisms, noise, inliers, initial, folds) ->
     return total
 
 
+def _starts(current: dict, mech) -> list:
+    """Starting points for a candidate: the current fit with the mechanism at its
+    typical size, smaller and larger, and the default start (a nonlinear
+    parameter such as a characteristic speed has local minima)."""
+    init = mech.initial()
+    out = [{**current, **init}, dict(init)]
+    for factor in (0.25, 4.0):
+        out.append({**current, **{k: v * factor if mech.parameters[k].positive else v for k, v in init.items()}})
+    return out
+
+
+def _best_of_starts(dataset, spec, mechanisms, noise, inliers, current, mech) -> FitResult:
+    best = None
+    for start in _starts(current, mech):
+        fit = fit_least_squares(dataset, spec, mechanisms, FitOptions(fixed_noise=noise, fixed_inliers=inliers),
+                                initial=start)
+        if np.isfinite(fit.chi2) and (best is None or fit.chi2 < best.chi2):
+            best = fit
+    return best
+
+
 def _structure_key(s) -> tuple:
     return (s.channel, s.variable, s.order)
 
 
 def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
-             alpha: float = 1e-3, min_effect: float = 0.1, folds: int = 4, cv_top: int = 2,
+             alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 4, cv_top: int = 2,
              max_mechanisms: int = 3, progress=None) -> Diagnosis:
     """Find, name and model what the base model leaves out (see module doc)."""
     from motorid.discrepancy.catalog import all_mechanisms
@@ -117,9 +138,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         for mech in catalog:
             if mech in current_mechs or not channels & set(mech.channels):
                 continue
-            fit = fit_least_squares(dataset, spec, current_mechs + [mech],
-                                    FitOptions(fixed_noise=noise, fixed_inliers=inliers),
-                                    initial=current.params_all)
+            fit = _best_of_starts(dataset, spec, current_mechs + [mech], noise, inliers, current.params_all, mech)
             d = current.chi2 - fit.chi2
             k = sum(1 for p in mech.parameters if fit.identifiable.get(p))
             scored.append(Candidate(mech, fit, d, d - k * np.log(n_res)))
@@ -170,6 +189,12 @@ def _rms(ls: FitResult, c: str):
     return float(np.sqrt(np.mean(r**2))) if r.size else None
 
 
+def _noise_rms(ls: FitResult, c: str):
+    """The noise level the residual RMS should come down to: RMS of the σ of the samples."""
+    s = np.asarray(ls.sigma[c])[ls.inliers[c]]
+    return float(np.sqrt(np.mean(s**2))) if s.size else None
+
+
 def diagnosis_document(dg: Diagnosis, spec) -> dict:
     """diagnosis.json: what was found, where, and what it did to the fit."""
     from motorid.identify.results import _clean
@@ -198,7 +223,7 @@ def diagnosis_document(dg: Diagnosis, spec) -> dict:
         "mismatch": dg.mismatch,
         "mechanisms": mechs,
         "channels": {c: {"residual_rms_before": _rms(dg.base, c), "residual_rms_after": _rms(dg.final, c),
-                         "noise": dg.base.noise.get(c), "words": CHANNEL_WORDS[c]} for c in channels},
+                         "noise": _noise_rms(dg.final, c), "words": CHANNEL_WORDS[c]} for c in channels},
         "parameters_before": {k: {"value": dg.base.values[k], "std": dg.base.std[k]} for k in dg.base.names},
         "parameters_after": {k: {"value": dg.final.values.get(k), "std": dg.final.std.get(k)} for k in dg.base.names},
         "located_before": [s.as_dict() for s in dg.location_before.significant],

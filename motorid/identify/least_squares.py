@@ -183,6 +183,23 @@ def _initial_noise(values, run_of_sample, n_runs) -> np.ndarray:
     return out
 
 
+def _spikiness(res, run_of, channel: str) -> np.ndarray:
+    """How far each residual stands out from its neighbours in the run (Hampel).
+
+    An isolated spike stands out from the running median of five samples; a
+    sustained misfit (an offset over a run, a slow trend) does not, so outlier
+    rejection removes spikes and leaves model error for the discrepancy search.
+    Breakaway events are single samples: they stand against zero.
+    """
+    if channel == "breakaway" or res.size < 5:
+        return res
+    import pandas as pd
+
+    r = pd.Series(res)
+    med = r.groupby(run_of).transform(lambda x: x.rolling(5, center=True, min_periods=1).median())
+    return (r - med).to_numpy()
+
+
 def _residual_noise(res, run_of_sample, n_runs) -> np.ndarray:
     out = np.full(n_runs, np.nan)
     for r in range(n_runs):
@@ -264,6 +281,17 @@ def _residual_unconstrained(y, ctx: _Ctx):
 
 
 _residual_jit = eqx.filter_jit(_residual_natural)
+
+
+@eqx.filter_jit
+def _normal_equations(values: dict, ctx: _Ctx):
+    """JᵀJ, Jᵀr and rᵀr of the weighted residual over the free parameters (in
+    the order of ``ctx.free``): the sufficient statistics of a Gauss-Newton step,
+    computed where the data are, so that no tall matrix leaves the device."""
+    r = _residual_natural(values, ctx)
+    jac = jax.jacfwd(_residual_natural)(values, ctx)
+    J = jnp.stack([jac[k] for k in ctx.free], axis=1)
+    return J.T @ J, J.T @ r, r @ r
 _jacobian_jit = eqx.filter_jit(jax.jacfwd(_residual_natural))
 _predictions_jit = eqx.filter_jit(_predictions)
 
@@ -456,7 +484,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         for c in obs:
             r = np.where(inliers[c], res[c], np.nan)
             if opt.fixed_noise is not None:
-                new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * (
+                new_inliers[c] = np.isfinite(obs[c]) & (np.abs(_spikiness(res[c], run_of, c)) <= opt.outlier_sigma * (
                     sig_brk if c == "breakaway" else sig_runs[c][run_of]))
             elif c == "breakaway":
                 finite = r[np.isfinite(r)]
@@ -466,7 +494,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
                 new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * sig_brk)
             else:
                 sig_runs[c] = _floor_noise(_residual_noise(r, run_of, n_runs), obs[c])
-                new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * sig_runs[c][run_of])
+                new_inliers[c] = np.isfinite(obs[c]) & (np.abs(_spikiness(res[c], run_of, c)) <= opt.outlier_sigma * sig_runs[c][run_of])
         stable = all(np.array_equal(new_inliers[c], inliers[c]) for c in obs)
         inliers = new_inliers
         if stable and round_ >= 1:
@@ -481,10 +509,9 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     # covariance in natural units from the weighted Jacobian of the cells at the optimum
     x_free = _as_jnp(values)
     ctx = problem.ctx()
-    J = np.zeros((0, 0))
+    JtJ = np.zeros((0, 0))
     if free:
-        jac = _jacobian_jit(x_free, ctx)
-        J = np.column_stack([np.asarray(jac[k]) for k in free])
+        JtJ = np.asarray(_normal_equations(x_free, ctx)[0])
     pred = problem.predictions(values)
     residuals = {c: obs[c] - pred[c] for c in obs}
     sig = {c: sig_runs[c][run_of] for c in sig_runs}
@@ -493,7 +520,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     used = {c: int(np.sum(inliers[c])) for c in obs}
     chi2 = float(sum(np.sum((residuals[c][inliers[c]] / sig[c][inliers[c]]) ** 2) for c in obs))
     dof = max(sum(used.values()) - len(free), 1)
-    cov = _covariance(J) if free else np.zeros((0, 0))
+    cov = _covariance(JtJ) if free else np.zeros((0, 0))
     if chi2 / dof > 1.0:
         cov = cov * (chi2 / dof)  # noise underestimated: widen, never narrow
     std = np.sqrt(np.clip(np.diag(cov), 0, None)) if free else np.zeros(0)
@@ -540,20 +567,21 @@ def _as_jnp(values: dict) -> dict:
     return {k: jnp.asarray(v, dtype=jnp.float64) for k, v in values.items()}
 
 
-def _covariance(J: np.ndarray) -> np.ndarray:
-    """(JᵀJ)⁻¹ of a weighted Jacobian, computed on unit-norm columns."""
-    norms = np.linalg.norm(J, axis=0)
+def _covariance(JtJ: np.ndarray) -> np.ndarray:
+    """(JᵀJ)⁻¹ from the normal matrix, computed on unit-norm columns."""
+    norms = np.sqrt(np.clip(np.diag(JtJ), 0, None))
     norms = np.where(norms > 0, norms, 1.0)
-    _, s, vt = np.linalg.svd(J / norms, full_matrices=False)
-    keep = s > s[0] * 1e-12
-    inv = np.zeros_like(s)
-    inv[keep] = 1.0 / s[keep] ** 2
-    return ((vt.T * inv) @ vt) / np.outer(norms, norms)
+    w, v = np.linalg.eigh(JtJ / np.outer(norms, norms))
+    keep = w > w.max() * 1e-24
+    inv = np.zeros_like(w)
+    inv[keep] = 1.0 / w[keep]
+    return ((v * inv) @ v.T) / np.outer(norms, norms)
 
 
-def _null_space_names(J: np.ndarray, free: list, tol: float) -> dict:
-    """Parameters in directions the weighted Jacobian cannot see."""
-    norms = np.linalg.norm(J, axis=0)
+def _null_space_names(JtJ: np.ndarray, free: list, tol: float) -> dict:
+    """Parameters in directions the weighted Jacobian cannot see (relative
+    singular value below ``tol``, from the eigenvalues of the normal matrix)."""
+    norms = np.sqrt(np.clip(np.diag(JtJ), 0, None))
     out = {}
     for i, k in enumerate(free):
         if norms[i] == 0 or not np.isfinite(norms[i]):
@@ -561,9 +589,11 @@ def _null_space_names(J: np.ndarray, free: list, tol: float) -> dict:
     cols = np.where((norms > 0) & np.isfinite(norms))[0]
     if cols.size == 0:
         return out
-    Jn = J[:, cols] / norms[cols]
-    _, s, vt = np.linalg.svd(Jn, full_matrices=False)
-    weak = np.where(s < tol * s[0])[0]
+    Jn = JtJ[np.ix_(cols, cols)] / np.outer(norms[cols], norms[cols])
+    w, v = np.linalg.eigh(Jn)
+    s = np.sqrt(np.clip(w, 0, None))
+    weak = np.where(s < tol * s.max())[0]
+    vt = v.T
     for j in weak:
         involved = [free[cols[i]] for i in np.where(np.abs(vt[j]) > 0.2)[0]]
         for k in involved:
@@ -580,14 +610,12 @@ def _solve(problem: _Problem, values: dict, free: list, reasons: dict, opt: FitO
     if first and free:
         # the base model is linear in most parameters: a few Gauss-Newton steps in
         # natural (scaled) coordinates land next to the optimum from any start
-        for _ in range(6):
+        for _ in range(8):
             ctx = problem.ctx()
-            x = _as_jnp(values)
-            r = np.asarray(_residual_jit(x, ctx))
-            jac = _jacobian_jit(x, ctx)
+            JtJ, Jtr, _ = (np.asarray(a) for a in _normal_equations(_as_jnp(values), ctx))
             scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
-            J = np.column_stack([np.asarray(jac[k]) for k in free]) * scales
-            bad = _null_space_names(J, free, opt.null_space_tol)
+            JtJ, Jtr = JtJ * np.outer(scales, scales), Jtr * scales
+            bad = _null_space_names(JtJ, free, opt.null_space_tol)
             if bad:
                 for k, why in bad.items():
                     reasons[k] = why
@@ -597,9 +625,17 @@ def _solve(problem: _Problem, values: dict, free: list, reasons: dict, opt: FitO
                 if not free:
                     break
                 continue
-            step, *_ = np.linalg.lstsq(J, -r, rcond=None)
+            norms = np.sqrt(np.diag(JtJ))
+            step = -np.linalg.solve(JtJ / np.outer(norms, norms), Jtr / norms) / norms
             for i, k in enumerate(free):
-                values[k] = values[k] + step[i] * scales[i]
+                new = values[k] + step[i] * scales[i]
+                if model.parameter_info(k, mechs).positive and values[k] > 0:
+                    # a positive parameter may shrink at most fivefold a step: a
+                    # nonlinear one (a characteristic speed) must not jump to 0
+                    new = max(new, 0.2 * values[k])
+                values[k] = new
+            if np.max(np.abs(step)) < 1e-10:
+                break
         for k in free:
             info = model.parameter_info(k, mechs)
             if info.positive and values[k] <= 0:
