@@ -102,13 +102,17 @@ def _starts(current: dict, mech) -> list:
 
 
 def _best_of_starts(dataset, spec, mechanisms, noise, inliers, current, mech) -> FitResult:
+    """Screen the starts with a few Levenberg-Marquardt steps, finish the best."""
     best = None
     for start in _starts(current, mech):
-        fit = fit_least_squares(dataset, spec, mechanisms, FitOptions(fixed_noise=noise, fixed_inliers=inliers),
-                                initial=start)
+        fit = fit_least_squares(dataset, spec, mechanisms,
+                                FitOptions(fixed_noise=noise, fixed_inliers=inliers, max_steps=12), initial=start)
         if np.isfinite(fit.chi2) and (best is None or fit.chi2 < best.chi2):
             best = fit
-    return best
+    if best is None:
+        return fit
+    return fit_least_squares(dataset, spec, mechanisms, FitOptions(fixed_noise=noise, fixed_inliers=inliers),
+                             initial=best.params_all)
 
 
 def _structure_key(s) -> tuple:
@@ -116,7 +120,7 @@ def _structure_key(s) -> tuple:
 
 
 def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
-             alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 4, cv_top: int = 2,
+             alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 3, cv_top: int = 1,
              max_mechanisms: int = 3, progress=None) -> Diagnosis:
     """Find, name and model what the base model leaves out (see module doc)."""
     from motorid.discrepancy.catalog import all_mechanisms

@@ -5,6 +5,12 @@
 the numbers behind them from :mod:`motorid.report.evaluate`.
 """
 
-from motorid.report.html import REPORT_FILE, write_report
-
 __all__ = ["REPORT_FILE", "write_report"]
+
+
+def __getattr__(name):  # lazy: matplotlib is imported only when a report is written
+    if name in __all__:
+        from motorid.report import html
+
+        return getattr(html, name)
+    raise AttributeError(name)
