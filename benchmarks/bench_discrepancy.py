@@ -20,7 +20,6 @@ import tomllib
 from pathlib import Path
 
 import jax.numpy as jnp
-import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "synthetic_data" / "concealed"))

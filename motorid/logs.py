@@ -11,12 +11,13 @@ import gzip
 import io
 import os
 import re
-import tempfile
 import zlib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from motorid._atomic import write_bytes_atomic
 
 from motorid.errors import InputError
 
@@ -84,19 +85,7 @@ def write_log(frame: pd.DataFrame, path, full_precision: bool = False) -> Path:
         with gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as gz:
             gz.write(data)
         data = raw.getvalue()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes files private; a log is not
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_bytes_atomic(path, data)
     return path
 
 

@@ -8,7 +8,7 @@ spec, never the truth (kept in truths/).  Clean campaigns carry none.
 import json
 import tomllib
 
-import numpy as np
+
 import pytest
 
 from conftest import REPO

@@ -13,11 +13,10 @@ existing log is replaced only when asked (``force``).
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 from motorid import __version__
+from motorid._atomic import write_bytes_atomic
 from motorid.bench.simulate import Campaign, protocol_names
 from motorid.errors import InputError
 from motorid.logs import write_log
@@ -25,25 +24,8 @@ from motorid.logs import write_log
 LOG_NAME = "campaign.csv.gz"
 
 
-def _make_public(path) -> None:
-    """Give a file the mode the umask allows (mkstemp makes it private; a result file is not)."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)
-
-
 def _write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        _make_public(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_bytes_atomic(path, data)
 
 
 def _copy(src, dst: Path) -> Path:
@@ -76,7 +58,6 @@ def write_campaign(campaign: Campaign, out_dir, protocols, motor_path, truth_pat
     paths = {"log": write_log(campaign.frame, log, full_precision=full_precision),
              "truth": _copy(truth_path, out / "truth.toml"),
              "motor": _copy(motor_path, out / "motor.toml")}
-    _make_public(paths["log"])
     names = protocol_names(protocols)
     paths["protocols"] = [_copy(p.source, out / "protocols" / f"{name}.toml") for p, name in zip(protocols, names)]
     manifest = {

@@ -142,7 +142,8 @@ def _quantile_groups(x, n_groups, log=False, fmt=str):
         qs = np.quantile(vals[ok], np.linspace(0, 1, n_groups + 1))
         edges = np.unique(np.concatenate([[-np.inf], qs[1:-1], [np.inf]]))
     idx = np.digitize(vals, edges[1:-1])
-    labels, order = [], []
+    order = []
+    lab_of = np.array([None] * x.size, dtype=object)
     for g in range(len(edges) - 1):
         sel = ok & (idx == g)
         if not sel.any():
@@ -150,13 +151,7 @@ def _quantile_groups(x, n_groups, log=False, fmt=str):
         lo, hi = vals[sel].min(), vals[sel].max()
         lab = fmt(lo) if np.isclose(lo, hi) else f"{fmt(lo)} to {fmt(hi)}"
         order.append(lab)
-    lab_of = np.array([None] * x.size, dtype=object)
-    for g in range(len(edges) - 1):
-        sel = ok & (idx == g)
-        if not sel.any():
-            continue
-        lo, hi = vals[sel].min(), vals[sel].max()
-        lab_of[sel] = fmt(lo) if np.isclose(lo, hi) else f"{fmt(lo)} to {fmt(hi)}"
+        lab_of[sel] = lab
     return _Labels(lab_of, order)
 
 
@@ -193,7 +188,6 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
     kmax = max_order or 2 * spec.pistons + 2
     found: list[Structure] = []
 
-    speed = np.asarray(s.speed)
     per_run = {
         "speed": _quantile_groups(runs["speed_median_rad_s"].abs().to_numpy(), 6, fmt=_rpm),
         "direction": _Labels(np.where(runs["direction"].to_numpy() > 0, "positive rotation",

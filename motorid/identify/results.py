@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
+import io
 import json
-import os
 import platform
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from motorid import model
+from motorid._atomic import write_bytes_atomic
 from motorid.identify.least_squares import CHANNEL_UNITS, FitResult
 
 RESULT_FILE = "result.json"
@@ -117,31 +117,12 @@ def dataset_summary(ds) -> dict:
 
 
 def write_json_atomic(doc: dict, path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(doc, fh, indent=1, allow_nan=False)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    return write_bytes_atomic(path, text.encode())
 
 
 def write_chain(bayes, path) -> Path:
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".npz")
-    os.close(fd)
-    try:
-        np.savez_compressed(tmp, chain=bayes.chain, log_prob=bayes.log_prob, names=np.array(bayes.names),
-                            burn=bayes.burn, thin=bayes.thin)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    buf = io.BytesIO()
+    np.savez_compressed(buf, chain=bayes.chain, log_prob=bayes.log_prob, names=np.array(bayes.names),
+                        burn=bayes.burn, thin=bayes.thin)
+    return write_bytes_atomic(path, buf.getvalue())

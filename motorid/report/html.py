@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motorid.bench.campaign import _write_bytes
+from motorid._atomic import write_bytes_atomic
 from motorid.report import format as fmt
 from motorid.report import plots
 from motorid.report.evaluate import BAR, RPM, Ensemble, ReportData, gather, noise_by_run
@@ -93,7 +93,7 @@ def write_report(out_dir, identification=None, spec=None, logs=None, motor=None)
     rd = gather(out, identification=identification, spec=spec, logs=logs, motor=motor)
     page = render(rd)
     path = out / REPORT_FILE
-    _write_bytes(path, page.encode("utf-8"))  # temporary file, then rename; readable as the umask allows
+    write_bytes_atomic(path, page.encode("utf-8"))  # temporary file, then rename; readable as the umask allows
     return path
 
 
