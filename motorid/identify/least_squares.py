@@ -46,6 +46,7 @@ class FitOptions:
     null_space_tol: float = 1e-7  # relative singular value below which a direction is unidentified
     fixed: dict = field(default_factory=dict)  # parameters held at given values
     bins_per_pitch: int = 192  # shaft-angle cells per piston pitch (data reduction)
+    compress: bool = True  # exact compression where the model is quadratic in the parameters
     # hold the noise levels (channel -> σ per run; "breakaway" -> σ) and the
     # inlier masks (channel -> bool per sample) of an earlier fit: to compare
     # models on equal terms, or to hold runs out of a fit
@@ -527,7 +528,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     ctx = problem.ctx()
     JtJ = np.zeros((0, 0))
     if free:
-        JtJ = np.asarray(_normal_equations(x_free, ctx)[0])
+        JtJ = _backend(problem, values, free, opt).normal(values)[0]
     pred = problem.predictions(values)
     residuals = {c: obs[c] - pred[c] for c in obs}
     sig = {c: sig_runs[c][run_of] for c in sig_runs}
@@ -619,6 +620,115 @@ def _null_space_names(JtJ: np.ndarray, free: list, tol: float) -> dict:
     return out
 
 
+class _FullBackend:
+    """The optimizer's view of the problem: every cell, through the JAX model."""
+
+    def __init__(self, problem: _Problem):
+        self.problem = problem
+
+    def normal(self, values: dict):
+        JtJ, Jtr, rr = _normal_equations(_as_jnp(values), self.problem.ctx())
+        return np.asarray(JtJ), np.asarray(Jtr), float(rr)
+
+    def chi2(self, values: dict, ctx=None) -> float:
+        return float(jnp.sum(_residual_jit(_as_jnp(values), ctx or self.problem.ctx()) ** 2))
+
+    def levenberg_marquardt(self, values: dict, free: list, opt: FitOptions):
+        mechs = self.problem.mechanisms
+        scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
+        ctx = self.problem.ctx(scales)
+        y0 = _to_unconstrained(_as_jnp(values), ctx)
+        sol = _levenberg_marquardt(y0, ctx, opt.rtol, opt.atol, opt.max_steps)
+        new = {k: float(v) for k, v in _from_unconstrained(sol.value, ctx).items()}
+        return new, int(sol.stats.get("num_steps", 0)), bool(sol.result == optx.RESULTS.successful)
+
+
+class _CompressedCtx(NamedTuple):
+    R0: jax.Array
+    R1: jax.Array
+    p0: jax.Array
+    a: jax.Array
+    b: jax.Array
+    half: jax.Array
+    positive: tuple
+    scales: jax.Array
+
+
+def _compressed_residual(y, c: _CompressedCtx):
+    pos = np.array(c.positive, dtype=bool)
+    p = jnp.where(pos, jnp.exp(y), y) * c.scales
+    d = p - c.p0
+    return c.R0 - c.R1 @ jnp.concatenate([d, d[c.a] * d[c.b] * c.half])
+
+
+@eqx.filter_jit
+def _levenberg_marquardt_compressed(y0, c: _CompressedCtx, rtol, atol, max_steps):
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    return optx.least_squares(_compressed_residual, solver, y0, args=c, max_steps=max_steps, throw=False)
+
+
+class _CompressedBackend:
+    """The same problem through its exact compression (:mod:`motorid.identify.compress`)."""
+
+    def __init__(self, problem: _Problem, expansion):
+        self.problem, self.exp = problem, expansion
+        self.R0, self.R1 = expansion.compress(*problem.cells)
+        self.p = len(expansion.names)
+
+    def _delta(self, values):
+        return np.array([values[k] for k in self.exp.names]) - self.exp.p0
+
+    def residual(self, values):
+        d = self._delta(values)
+        return self.R0 - self.R1 @ np.concatenate([d, self.exp.products(d)])
+
+    def jacobian(self, values):
+        d = self._delta(values)
+        du = np.zeros((len(self.exp.pairs), self.p))
+        for k, (a, b) in enumerate(self.exp.pairs):
+            du[k, a] += self.exp.half[k] * d[b]
+            du[k, b] += self.exp.half[k] * d[a]
+        return -(self.R1[:, : self.p] + self.R1[:, self.p:] @ du)
+
+    def normal(self, values: dict):
+        J, r = self.jacobian(values), self.residual(values)
+        return J.T @ J, J.T @ r, float(r @ r)
+
+    def chi2(self, values: dict, ctx=None) -> float:
+        r = self.residual(values)
+        return float(r @ r)
+
+    def levenberg_marquardt(self, values: dict, free: list, opt: FitOptions):
+        mechs = self.problem.mechanisms
+        scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
+        positive = tuple(bool(model.parameter_info(k, mechs).positive) for k in free)
+        c = _CompressedCtx(jnp.asarray(self.R0), jnp.asarray(self.R1), jnp.asarray(self.exp.p0),
+                           jnp.asarray(self.exp.a), jnp.asarray(self.exp.b), jnp.asarray(self.exp.half),
+                           positive, jnp.asarray(scales))
+        pos = np.array(positive)
+        v = np.array([values[k] for k in free]) / scales
+        y0 = jnp.asarray(np.where(pos, np.log(np.where(pos, v, 1.0)), v))
+        sol = _levenberg_marquardt_compressed(y0, c, opt.rtol, opt.atol, opt.max_steps)
+        y = np.asarray(sol.value)
+        p = np.where(pos, np.exp(y), y) * scales
+        new = {k: float(p[i]) for i, k in enumerate(free)}
+        return new, int(sol.stats.get("num_steps", 0)), bool(sol.result == optx.RESULTS.successful)
+
+
+def _backend(problem: _Problem, values: dict, free: list, opt: FitOptions):
+    """The compressed problem where the model is quadratic in the free parameters, else the full one."""
+    if opt.compress and free:
+        key = tuple(free)
+        if getattr(problem, "_expansion_key", None) != key:
+            from motorid.identify.compress import Expansion
+
+            problem._expansion = Expansion.build(problem, values, list(free))
+            problem._expansion_key = key
+        if problem._expansion is not None:
+            return _CompressedBackend(problem, problem._expansion)
+    return _FullBackend(problem)
+
+
 def _solve(problem: _Problem, values: dict, free: list, reasons: dict, opt: FitOptions, first: bool):
     """Gauss-Newton start (first round), null-space check, then Levenberg-Marquardt."""
     mechs = problem.mechanisms
@@ -627,8 +737,8 @@ def _solve(problem: _Problem, values: dict, free: list, reasons: dict, opt: FitO
         # the base model is linear in most parameters: a few Gauss-Newton steps in
         # natural (scaled) coordinates land next to the optimum from any start
         for _ in range(8):
-            ctx = problem.ctx()
-            JtJ, Jtr, _ = (np.asarray(a) for a in _normal_equations(_as_jnp(values), ctx))
+            backend = _backend(problem, values, free, opt)
+            JtJ, Jtr, _ = backend.normal(values)
             scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
             JtJ, Jtr = JtJ * np.outer(scales, scales), Jtr * scales
             bad = _null_space_names(JtJ, free, opt.null_space_tol)
@@ -658,14 +768,8 @@ def _solve(problem: _Problem, values: dict, free: list, reasons: dict, opt: FitO
                 values[k] = 1e-3 * info.typical
     if not free:
         return values, 0, True, free, reasons
-    scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
-    ctx = problem.ctx(scales)
-    y0 = _to_unconstrained(_as_jnp(values), ctx)
-    sol = _levenberg_marquardt(y0, ctx, opt.rtol, opt.atol, opt.max_steps)
-    ok = bool(sol.result == optx.RESULTS.successful)
-    new = {k: float(v) for k, v in _from_unconstrained(sol.value, ctx).items()}
-    before = float(jnp.sum(_residual_jit(_as_jnp(values), ctx) ** 2))
-    after = float(jnp.sum(_residual_jit(_as_jnp(new), ctx) ** 2))
-    if after <= before * (1 + 1e-12):
+    backend = _backend(problem, values, free, opt)
+    new, steps, ok = backend.levenberg_marquardt(values, free, opt)
+    if backend.chi2(new) <= backend.chi2(values) * (1 + 1e-12):
         values = new
-    return values, int(sol.stats.get("num_steps", 0)), ok, free, reasons
+    return values, steps, ok, free, reasons
