@@ -174,12 +174,21 @@ def _robust_std(x) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
+def _by_run(values, run_of_sample, n_runs):
+    """(run, finite values of that run) for every run, in one sort instead of a mask per run."""
+    order = np.argsort(run_of_sample, kind="stable")
+    runs = run_of_sample[order]
+    bounds = np.searchsorted(runs, np.arange(n_runs + 1))
+    vals = np.asarray(values, dtype=float)[order]
+    for r in range(n_runs):
+        v = vals[bounds[r]:bounds[r + 1]]
+        yield r, v[np.isfinite(v)]
+
+
 def _initial_noise(values, run_of_sample, n_runs) -> np.ndarray:
     """σ per run from first differences within the run (model-free start)."""
     out = np.full(n_runs, np.nan)
-    for r in range(n_runs):
-        v = values[run_of_sample == r]
-        v = v[np.isfinite(v)]
+    for r, v in _by_run(values, run_of_sample, n_runs):
         if v.size >= 3:
             out[r] = _robust_std(np.diff(v)) / np.sqrt(2.0)
     return out
@@ -215,10 +224,9 @@ def _spikiness(res, run_of, channel: str) -> np.ndarray:
 
 
 def _residual_noise(res, run_of_sample, n_runs) -> np.ndarray:
+    """σ per run from the residuals (robust: MAD about the run's median)."""
     out = np.full(n_runs, np.nan)
-    for r in range(n_runs):
-        v = res[run_of_sample == r]
-        v = v[np.isfinite(v)]
+    for r, v in _by_run(res, run_of_sample, n_runs):
         if v.size >= 5:
             out[r] = _robust_std(v)
     return out
@@ -409,6 +417,7 @@ class _Problem:
             obs["breakaway"] = jnp.asarray(pad(np.where(ok, self.held_torque, 0.0), size))
             w["breakaway"] = jnp.asarray(pad(np.where(ok, 1.0 / sigma_breakaway, 0.0), size))
         self.cells = (obs, w)
+        self.cells_version = getattr(self, "cells_version", 0) + 1
 
     def ctx(self, scales=None) -> _Ctx:
         free = tuple(self.free)
@@ -725,7 +734,10 @@ def _backend(problem: _Problem, values: dict, free: list, opt: FitOptions):
             problem._expansion = Expansion.build(problem, values, list(free))
             problem._expansion_key = key
         if problem._expansion is not None:
-            return _CompressedBackend(problem, problem._expansion)
+            cached = getattr(problem, "_compressed", None)
+            if cached is None or cached[0] != (key, problem.cells_version):
+                problem._compressed = ((key, problem.cells_version), _CompressedBackend(problem, problem._expansion))
+            return problem._compressed[1]
     return _FullBackend(problem)
 
 
