@@ -152,3 +152,22 @@ def test_jit_and_vmap():
     batch = {k: jnp.stack([v, 1.1 * v]) for k, v in _params().items()}
     out = jax.vmap(lambda p: model.predict(p, spec, s).q_case)(batch)
     assert out.shape == (2, 500)
+
+
+def test_parameter_transform_round_trip_and_positivity():
+    names = model.parameter_names(2)
+    p = {k: v for k, v in _params().items()}
+    p.update({"KL_a2": 0.05, "KL_b2": -0.02})
+    t = model.ParameterTransform(names)
+    y = t.to_unconstrained(p)
+    back = t.from_unconstrained(y)
+    for k in names:
+        assert float(back[k]) == pytest.approx(float(p[k]), rel=1e-12), k
+    # any unconstrained vector maps to positive values where physics demands it
+    wild = t.from_unconstrained(jnp.linspace(-50, 50, len(names)))
+    for k in names:
+        if model.parameter_info(k).positive:
+            assert float(wild[k]) > 0, k
+    # and the map is differentiable
+    g = jax.grad(lambda v: t.from_unconstrained(v)["KL0"])(y)
+    assert np.all(np.isfinite(np.asarray(g)))
