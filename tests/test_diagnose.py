@@ -86,3 +86,15 @@ def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys):
     rc = main(["diagnose", str(ROOT / name / "campaign.csv.gz"), "--motor", str(ROOT / name / "motor.toml"),
                "--out", str(tmp_path)])
     assert rc == 2 and "--force" in capsys.readouterr().err
+
+
+def test_report_tells_the_diagnosis_with_residual_plots(tmp_path, capsys):
+    name = "torque_offset"
+    log, motor = str(ROOT / name / "campaign.csv.gz"), str(ROOT / name / "motor.toml")
+    assert main(["fit", log, "--motor", motor, "--out", str(tmp_path)]) == 0
+    assert main(["diagnose", log, "--motor", motor, "--out", str(tmp_path)]) == 0
+    assert main(["report", str(tmp_path)]) == 0
+    page = (tmp_path / "report.html").read_text()
+    assert "torque_offset" in page and "Residuals before and after" in page
+    section = page[page.index('id="discrepancy"'):]
+    assert "data:image/png;base64," in section[: section.index("</section>")]

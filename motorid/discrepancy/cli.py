@@ -21,7 +21,12 @@ def register(sub):
 
 
 def run_diagnose(args) -> int:
-    from motorid.discrepancy.select import diagnose, diagnosis_document
+    import io
+
+    import numpy as np
+
+    from motorid._atomic import write_bytes_atomic
+    from motorid.discrepancy.select import diagnose, diagnosis_document, residual_arrays
     from motorid.identify.cli import check_output
     from motorid.identify.pipeline import load_campaign
     from motorid.identify.results import write_json_atomic
@@ -43,6 +48,9 @@ def run_diagnose(args) -> int:
     doc = diagnosis_document(dg, spec)
     doc["inputs"] = {"logs": [str(p) for p in args.logs], "motor": str(args.motor)}
     out.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **residual_arrays(dg, dataset))
+    write_bytes_atomic(out / "diagnosis_residuals.npz", buf.getvalue())
     write_json_atomic(doc, out / "diagnosis.json")
     print(format_diagnosis(doc))
     print(f"wrote {out / 'diagnosis.json'}")

@@ -237,3 +237,23 @@ def diagnosis_document(dg: Diagnosis, spec) -> dict:
         "tests": {"count": dg.location_before.tests, "threshold_p": dg.location_before.threshold},
     }
     return _clean(doc)
+
+
+def residual_arrays(dg: Diagnosis, dataset) -> dict:
+    """Residuals before and after (over σ) with their operating points, for the report's plots."""
+    out = {}
+    s = dataset.running
+    for c in dg.base.residuals:
+        before = dg.base.residuals[c] / dg.base.sigma[c]
+        after = dg.final.residuals[c] / dg.final.sigma[c]
+        ok = dg.base.inliers[c] & np.isfinite(before) & np.isfinite(after)
+        if c == "breakaway":  # at rest: plotted against the port-pressure sum instead of speed
+            ev = dataset.events
+            x_speed, x_theta = np.asarray(ev.p_a + ev.p_b), np.asarray(ev.theta)
+        else:
+            x_speed, x_theta = np.asarray(s.speed), np.asarray(s.theta)
+        out[f"{c}__before"] = before[ok]
+        out[f"{c}__after"] = after[ok]
+        out[f"{c}__speed"] = x_speed[ok]
+        out[f"{c}__theta"] = np.mod(x_theta[ok], 2 * np.pi)
+    return out

@@ -703,6 +703,10 @@ def _discrepancy(rd: ReportData) -> str:
     else:
         body.append("<p>None: no candidate mechanism earned its place.</p>")
     body.append(_rms_table(dg))
+    fig = plots.plot_discrepancy_residuals(Path(rd.out_dir) / "diagnosis_residuals.npz")
+    if fig is not None:
+        body.append('<h3>Residuals before and after</h3><p>Residual over the noise level of each sample, '
+                    'grey with the 1992 model alone, blue with the mechanisms found added.</p>' + fig.img)
     body.append(f"<h3>Unexplained</h3>{_unexplained(dg.get('unexplained'))}")
     rest = {k: v for k, v in dg.items() if k not in ("mismatch", "mechanisms", "residual_rms", "channels",
                                                      "unexplained")}

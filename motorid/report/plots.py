@@ -452,6 +452,46 @@ def plot_residuals(rd: ReportData) -> Plot | None:
                 {"shown": shown, "beyond2": beyond})
 
 
+def plot_discrepancy_residuals(path) -> Plot | None:
+    """Residuals over σ before and after the discrepancy search, against speed and shaft angle."""
+    try:
+        data = np.load(path)
+    except (OSError, ValueError):
+        return None
+    chans = [c for c in ("torque", "q_a", "q_b", "q_case", "breakaway") if f"{c}__before" in data.files
+             and data[f"{c}__before"].size]
+    if not chans:
+        return None
+    rng = np.random.default_rng(2)
+    fig, axes = _figure(len(chans), 2, figsize=(10.5, 1.9 * len(chans) + 0.5), squeeze=False)
+    for i, ch in enumerate(chans):
+        before, after = data[f"{ch}__before"], data[f"{ch}__after"]
+        keep = np.arange(before.size)
+        if keep.size > MAX_POINTS:
+            keep = np.sort(rng.choice(keep, MAX_POINTS, replace=False))
+        lim = max(4.0, min(float(np.max(np.abs(before[keep]))) * 1.1, 30.0))
+        first = ((data[f"{ch}__speed"] / BAR, "P_A + P_B at breakaway [bar]") if ch == "breakaway"
+                 else (data[f"{ch}__speed"] * RPM, "speed n [rpm]"))
+        for j, (x, label) in enumerate((first, (np.degrees(data[f"{ch}__theta"]), "shaft angle θ [deg]"))):
+            ax = axes[i, j]
+            ax.plot(x[keep], np.clip(before[keep], -lim, lim), ".", ms=1.6, color="#bbbbbb",
+                    label="base model", rasterized=True)
+            ax.plot(x[keep], np.clip(after[keep], -lim, lim), ".", ms=1.6, color="#1f77b4", alpha=0.5,
+                    label="with the mechanisms found", rasterized=True)
+            ax.axhline(0.0, color=MODEL_COLOR, lw=0.6)
+            ax.set_ylim(-lim, lim)
+            ax.set_xlabel(label)
+            if j == 0:
+                if ch != "breakaway":
+                    ax.set_xscale("symlog", linthresh=1.0)
+                ax.set_ylabel(f"{ch}\nresidual / σ")
+            else:
+                ax.set_xlim(0, 360)
+                ax.set_xticks(np.arange(0, 361, 90))
+    axes[0, 0].legend(loc="upper right", fontsize=7, markerscale=4)
+    return Plot(embed_png(fig, "residuals before and after the discrepancy search"), {"channels": chans})
+
+
 # ----------------------------------------------------------------------------- uncertainty
 
 
