@@ -82,10 +82,16 @@ class Expansion:
         order = tuple(c for c in ls.CHANNELS if c in ctx.observed)
         names = tuple(free)
         p0 = jnp.asarray([values[k] for k in names], dtype=jnp.float64)
-        small = _slice_ctx(ctx, 64)
-        Hs = np.asarray(_hessian_small(p0, names, small, order))
-        pairs = [(a, b) for a in range(len(names)) for b in range(a, len(names))
-                 if np.any(Hs[:, a, b] != 0) or np.any(Hs[:, b, a] != 0)]
+        if not problem.mechanisms:
+            # the 1992 model's own products: K_L0 with each Fourier coefficient, T_Fc with K_s
+            # (the exactness check below would catch any other)
+            products = [("KL0", k) for k in names if k.startswith("KL_")] + [("TFc", "Ks")]
+            pairs = sorted((min(names.index(a), names.index(b)), max(names.index(a), names.index(b)))
+                           for a, b in products if a in names and b in names)
+        else:
+            Hs = np.asarray(_hessian_small(p0, names, _slice_ctx(ctx, 64), order))
+            pairs = [(a, b) for a in range(len(names)) for b in range(a, len(names))
+                     if np.any(Hs[:, a, b] != 0) or np.any(Hs[:, b, a] != 0)]
         f0, J = (np.asarray(x) for x in _value_and_jacobian(p0, names, ctx, order))
         if pairs:
             H = np.asarray(_second_derivatives(p0, names, ctx, order, jnp.asarray([a for a, _ in pairs]),

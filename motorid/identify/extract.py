@@ -21,8 +21,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import minimize_scalar, nnls
-from scipy.signal import savgol_filter
 
 from motorid.errors import InputError
 from motorid.logs import SI_COLUMNS
@@ -233,6 +231,8 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
     dt = np.diff(t)
     scale = float(np.median(dt))
     if np.ptp(dt) <= 1e-6 * scale:  # even sampling: the same fit, by convolution
+        from scipy.signal import savgol_filter  # imported here: scipy.signal costs a second at start-up
+
         return savgol_filter(w, k, 2, deriv=1, delta=scale, mode="interp")
     first = np.clip(np.arange(n) - k // 2, 0, n - k)  # windows shift inwards at the ends
     idx = first[:, None] + np.arange(k)[None, :]
@@ -295,6 +295,8 @@ def _hinge_onset(t, dev, lo: int, last_rest: int, hi: int) -> float:
     pressure keeps rising): linear when the static friction exceeds the kinetic
     one, quadratic when they are equal.
     """
+    from scipy.optimize import minimize_scalar, nnls  # imported here: costs start-up time otherwise
+
     tt, yy = t[lo:hi + 1], dev[lo:hi + 1]
 
     def sse(t0):
