@@ -81,7 +81,7 @@ def _residual_of_z(z, ctx: _Ctx, center, scale):
 
 
 @eqx.filter_jit
-def _log_posterior_batch(z, ctx: _Ctx, center, scale, positive, prior_sd):
+def _log_posterior_batch(z, ctx: _Ctx, center, scale, positive, prior_sd, prior_mean=0.0):
     """log posterior at walkers z (W, ndim), z = (p − center)/scale, on the full model."""
 
     def one(zi):
@@ -89,7 +89,7 @@ def _log_posterior_batch(z, ctx: _Ctx, center, scale, positive, prior_sd):
         inside = jnp.all(jnp.where(positive, p > 0, True))
         r = _residual_of_z(zi, ctx, center, scale)
         log_like = -0.5 * jnp.sum(r**2)
-        log_prior = -0.5 * jnp.sum((p / prior_sd) ** 2)
+        log_prior = -0.5 * jnp.sum(((p - prior_mean) / prior_sd) ** 2)
         return jnp.where(inside, log_like + log_prior, -jnp.inf)
 
     return jax.vmap(one)(z)
@@ -142,11 +142,15 @@ class QuadraticLikelihood:
 def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
                      min_tau_multiple: float = 50.0, max_steps: int = 40000, chunk: int = 500,
                      seed: int = 0, progress: bool | None = None, max_seconds: float | None = None,
-                     fast: bool = True) -> BayesResult:
+                     fast: bool = True, prior: dict | None = None) -> BayesResult:
     """Run emcee from the least-squares solution until the chain is long enough.
 
     ls : the least-squares result: start, scales, free parameters, and its
         reduced problem with the final noise levels and inliers
+    prior : optional name → (mean, sd): a Normal(mean, sd) prior (truncated to
+        p > 0 for positive parameters) in place of the default weakly
+        informative one, for the parameters it names (e.g. a calibration prior
+        in simulation-based calibration); default None keeps the module's priors
     """
     problem: _Problem = ls.problem
     names = list(ls.free)
@@ -160,8 +164,13 @@ def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
     scale = np.where(std > 0, std, np.abs(center) * 1e-3 + 1e-300)
     positive = np.array([model.parameter_info(k, ls.mechanisms).positive for k in names])
     prior_sd = np.array([prior_scale(k, spec, ls.mechanisms) for k in names])
+    prior_mean = np.zeros(ndim)
+    for i, k in enumerate(names):
+        if prior and k in prior:
+            prior_mean[i], prior_sd[i] = (float(v) for v in prior[k])
     ctx = problem.ctx()
-    args = (ctx, jnp.asarray(center), jnp.asarray(scale), jnp.asarray(positive), jnp.asarray(prior_sd))
+    args = (ctx, jnp.asarray(center), jnp.asarray(scale), jnp.asarray(positive), jnp.asarray(prior_sd),
+            jnp.asarray(prior_mean))
 
     def log_prob_full(z):
         return np.asarray(_log_posterior_batch(jnp.asarray(z), *args))
@@ -174,7 +183,7 @@ def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
             return log_prob_full(z)
         p = center + z * scale
         inside = np.all(np.where(positive, p > 0, True), axis=1)
-        lp = -0.5 * quad.chi2(z) - 0.5 * np.sum((p / prior_sd) ** 2, axis=1)
+        lp = -0.5 * quad.chi2(z) - 0.5 * np.sum(((p - prior_mean) / prior_sd) ** 2, axis=1)
         return np.where(inside, lp, -np.inf)
 
     rng = np.random.default_rng(seed)
@@ -240,7 +249,7 @@ def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
         if gap > 0.05:
             warnings.append(f"second-order expansion off by {gap:.3g} in log-posterior; resampled on the full model")
             return sample_posterior(ls, spec, walkers, min_tau_multiple, max_steps, chunk, seed, progress,
-                                    max_seconds, fast=False)
+                                    max_seconds, fast=False, prior=prior)
         expansion_gap = gap
     else:
         expansion_gap = None
