@@ -230,10 +230,7 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
     k = _odd(min(max(window, 5), n))
     dt = np.diff(t)
     scale = float(np.median(dt))
-    if np.ptp(dt) <= 1e-6 * scale:  # even sampling: the same fit, by convolution
-        from scipy.signal import savgol_filter  # imported here: scipy.signal costs a second at start-up
-
-        return savgol_filter(w, k, 2, deriv=1, delta=scale, mode="interp")
+    # (for even sampling this is the Savitzky-Golay derivative, edges as its "interp" mode)
     first = np.clip(np.arange(n) - k // 2, 0, n - k)  # windows shift inwards at the ends
     idx = first[:, None] + np.arange(k)[None, :]
     x = (t[idx] - t[:, None]) / scale

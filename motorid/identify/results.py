@@ -18,17 +18,18 @@ CHAIN_FILE = "chain.npz"
 
 
 def versions() -> dict:
-    import emcee
-    import jax
-    import optimistix
-    import pandas
-    import scipy
+    """Versions of the packages a result depends on (read from their metadata, not imported)."""
+    from importlib.metadata import PackageNotFoundError, version
 
     import motorid
 
-    return {"motorid": motorid.__version__, "python": platform.python_version(), "numpy": np.__version__,
-            "scipy": scipy.__version__, "pandas": pandas.__version__, "jax": jax.__version__,
-            "optimistix": optimistix.__version__, "emcee": emcee.__version__}
+    out = {"motorid": motorid.__version__, "python": platform.python_version()}
+    for name in ("numpy", "scipy", "pandas", "jax", "jaxlib", "optimistix", "emcee"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = None
+    return out
 
 
 def _clean(x):
