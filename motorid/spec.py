@@ -153,15 +153,19 @@ def parse_motor_spec(data: dict, source: str = "motor spec") -> MotorSpec:
     )
 
 
-def load_motor_spec(path) -> MotorSpec:
-    """Read and validate a motor spec TOML file."""
+def read_toml(path, what: str) -> dict:
+    """Parse a TOML file; unreadable or invalid files raise :class:`InputError` naming it."""
     path = Path(path)
     try:
         text = path.read_text()
     except OSError as exc:
-        raise InputError(f"{path}: cannot read motor spec ({exc.strerror or exc})") from None
+        raise InputError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML ({exc})") from None
-    return parse_motor_spec(data, str(path))
+
+
+def load_motor_spec(path) -> MotorSpec:
+    """Read and validate a motor spec TOML file."""
+    return parse_motor_spec(read_toml(path, "motor spec"), str(Path(path)))

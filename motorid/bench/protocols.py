@@ -65,14 +65,13 @@ from __future__ import annotations
 
 import itertools
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from motorid.bench.sensors import Sensors, parse_sensors
 from motorid.errors import InputError
 from motorid.logs import PROTOCOLS
-from motorid.spec import _number
+from motorid.spec import _number, read_toml  # noqa: F401  (read_toml is re-exported)
 
 RPM = 2.0 * math.pi / 60.0  # [rad/s per rpm]
 BAR = 1e5  # [Pa per bar]
@@ -416,19 +415,6 @@ def parse_protocol(data: dict, source: str = "protocol", name: str | None = None
         description=head.get("description", ""),
         source=source,
     )
-
-
-def read_toml(path, what: str) -> dict:
-    """Parse a TOML file; unreadable or invalid files raise :class:`InputError`."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML ({exc})") from None
 
 
 def load_protocol(path) -> Protocol:
