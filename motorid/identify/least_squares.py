@@ -714,12 +714,14 @@ class _CompressedBackend:
         return -(self.R1[:, : self.p] + self.R1[:, self.p:] @ du)
 
     def normal(self, values: dict):
-        J, r = self.jacobian(values), self.residual(values)
-        return J.T @ J, J.T @ r, float(r @ r)
+        with np.errstate(over="ignore", invalid="ignore"):  # a wild trial point: the caller checks finiteness
+            J, r = self.jacobian(values), self.residual(values)
+            return J.T @ J, J.T @ r, float(r @ r)
 
     def chi2(self, values: dict, ctx=None) -> float:
-        r = self.residual(values)
-        return float(r @ r)
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = self.residual(values)
+            return float(r @ r)
 
     def levenberg_marquardt(self, values: dict, free: list, opt: FitOptions):
         mechs = self.problem.mechanisms
@@ -766,7 +768,10 @@ def _solve(problem: _Problem, values: dict, free: list, reasons: dict, opt: FitO
             backend = _backend(problem, values, free, opt)
             JtJ, Jtr, _ = backend.normal(values)
             scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
-            JtJ, Jtr = JtJ * np.outer(scales, scales), Jtr * scales
+            with np.errstate(over="ignore", invalid="ignore"):
+                JtJ, Jtr = JtJ * np.outer(scales, scales), Jtr * scales
+            if not (np.all(np.isfinite(JtJ)) and np.all(np.isfinite(Jtr))):
+                break  # leave a point this wild to Levenberg-Marquardt
             bad = _null_space_names(JtJ, free, opt.null_space_tol)
             if bad:
                 for k, why in bad.items():
