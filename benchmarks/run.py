@@ -46,12 +46,13 @@ def machine() -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--only", nargs="*", default=None)
+    ap.add_argument("--only", nargs="*", default=None,
+                    help="run only these studies (none: just reassemble results.md from the sections)")
     ap.add_argument("--quick", action="store_true", help="smaller studies, for a smoke run")
     a = ap.parse_args(argv)
     sys.path.insert(0, str(HERE))
     (HERE / "sections").mkdir(exist_ok=True)
-    for name in a.only or STUDIES:
+    for name in (STUDIES if a.only is None else a.only):
         t0 = time.time()
         print(f"== {name}", flush=True)
         section = importlib.import_module(name).run(quick=a.quick)
