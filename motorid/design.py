@@ -425,8 +425,7 @@ def _register(sub):
 
 
 def _cmd_plan(args) -> int:
-    from pathlib import Path
-
+    from motorid.identify.cli import check_logs_exist
     from motorid.identify.least_squares import fit_least_squares
     from motorid.identify.pipeline import load_campaign
     from motorid.spec import load_motor_spec
@@ -434,9 +433,7 @@ def _cmd_plan(args) -> int:
     if args.top < 1:
         raise InputError(f"--top must be at least 1, got {args.top}")
     spec = load_motor_spec(args.motor)
-    for log in args.logs:
-        if not Path(log).exists():
-            raise InputError(f"{log}: no such file")
+    check_logs_exist(args.logs)
     _, dataset = load_campaign(args.logs, spec)
     ls = fit_least_squares(dataset, spec)
     plan = suggest_runs(ls, dataset, spec, top=args.top, parameter=args.parameter)

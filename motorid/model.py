@@ -226,6 +226,17 @@ def as_float(params: dict) -> dict:
     return {k: float(np.asarray(v)) for k, v in params.items()}
 
 
+def constrain(y, positive, scales):
+    """Unconstrained vector → parameter values: p = s·exp(y) where positive, else s·y."""
+    return jnp.where(positive, jnp.exp(y), y) * scales
+
+
+def unconstrain(values, positive, scales):
+    """Parameter values → unconstrained vector: y = log(p/s) where positive, else p/s."""
+    v = values / scales
+    return jnp.where(positive, jnp.log(jnp.where(positive, v, 1.0)), v)
+
+
 class ParameterTransform:
     """Map a parameter dict to an unconstrained vector for the optimizers and back.
 
@@ -244,9 +255,9 @@ class ParameterTransform:
         self.scales = np.array([sc[n] for n in self.names])
 
     def to_unconstrained(self, params: dict):
-        v = jnp.stack([jnp.asarray(params[n], dtype=jnp.float64) for n in self.names]) / self.scales
-        return jnp.where(self.positive, jnp.log(jnp.where(self.positive, v, 1.0)), v)
+        v = jnp.stack([jnp.asarray(params[n], dtype=jnp.float64) for n in self.names])
+        return unconstrain(v, self.positive, self.scales)
 
     def from_unconstrained(self, x) -> dict:
-        v = jnp.where(self.positive, jnp.exp(x), x) * self.scales
+        v = constrain(x, self.positive, self.scales)
         return {n: v[i] for i, n in enumerate(self.names)}

@@ -27,7 +27,7 @@ def run_diagnose(args) -> int:
 
     from motorid._atomic import write_bytes_atomic
     from motorid.discrepancy.select import diagnose, diagnosis_document, residual_arrays
-    from motorid.identify.cli import check_output
+    from motorid.identify.cli import check_logs_exist, check_output
     from motorid.identify.pipeline import load_campaign
     from motorid.identify.results import write_json_atomic
     from motorid.spec import load_motor_spec
@@ -36,9 +36,7 @@ def run_diagnose(args) -> int:
     out = Path(args.out)
     check_output(out, args.force, files=("diagnosis.json",))
     spec = load_motor_spec(args.motor)
-    for log in args.logs:
-        if not Path(log).exists():
-            raise InputError(f"{log}: no such file")
+    check_logs_exist(args.logs)
     if not 0 < args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
     _, dataset = load_campaign(args.logs, spec)

@@ -31,6 +31,12 @@ def check_output(out: Path, force: bool, files=("result.json",)):
         raise InputError(f"--out {out}: exists and is not a folder")
 
 
+def check_logs_exist(logs) -> None:
+    for log in logs:
+        if not Path(log).exists():
+            raise InputError(f"{log}: no such file")
+
+
 def run_fit(args) -> int:
     from motorid.identify.least_squares import FitOptions
     from motorid.identify.pipeline import identify
@@ -42,9 +48,7 @@ def run_fit(args) -> int:
     if args.harmonics is not None and not 0 <= args.harmonics <= 10:
         raise InputError(f"--harmonics must be between 0 and 10, got {args.harmonics}")
     spec = load_motor_spec(args.motor)
-    for log in args.logs:
-        if not Path(log).exists():
-            raise InputError(f"{log}: no such file")
+    check_logs_exist(args.logs)
     res = identify(args.logs, spec, bayes=args.bayes, options=FitOptions(harmonics=args.harmonics),
                    seed=args.seed)
     inputs = {"logs": [str(p) for p in args.logs], "motor": str(args.motor)}

@@ -292,15 +292,13 @@ def _residual_natural(values: dict, ctx: _Ctx):
 
 
 def _from_unconstrained(y, ctx: _Ctx) -> dict:
-    pos = np.array(ctx.positive, dtype=bool)
-    v = jnp.where(pos, jnp.exp(y), y) * ctx.scales
+    v = model.constrain(y, np.array(ctx.positive, dtype=bool), ctx.scales)
     return {k: v[i] for i, k in enumerate(ctx.free)}
 
 
 def _to_unconstrained(values: dict, ctx: _Ctx):
-    pos = np.array(ctx.positive, dtype=bool)
-    v = jnp.stack([jnp.asarray(values[k], dtype=jnp.float64) for k in ctx.free]) / ctx.scales
-    return jnp.where(pos, jnp.log(jnp.where(pos, v, 1.0)), v)
+    v = jnp.stack([jnp.asarray(values[k], dtype=jnp.float64) for k in ctx.free])
+    return model.unconstrain(v, np.array(ctx.positive, dtype=bool), ctx.scales)
 
 
 def _residual_unconstrained(y, ctx: _Ctx):
@@ -319,7 +317,6 @@ def _normal_equations(values: dict, ctx: _Ctx):
     jac = jax.jacfwd(_residual_natural)(values, ctx)
     J = jnp.stack([jac[k] for k in ctx.free], axis=1)
     return J.T @ J, J.T @ r, r @ r
-_jacobian_jit = eqx.filter_jit(jax.jacfwd(_residual_natural))
 _predictions_jit = eqx.filter_jit(_predictions)
 
 
@@ -547,8 +544,6 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         warnings.append("Levenberg-Marquardt stopped at max_steps before converging; raise FitOptions.max_steps")
 
     # covariance in natural units from the weighted Jacobian of the cells at the optimum
-    x_free = _as_jnp(values)
-    ctx = problem.ctx()
     JtJ = np.zeros((0, 0))
     if free:
         JtJ = _backend(problem, values, free, opt).normal(values)[0]
@@ -601,6 +596,11 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         used=used, chi2=chi2, dof=dof, steps=steps_total, converged=bool(converged), warnings=warnings,
         residuals=residuals, sigma=sig, inliers=inliers, params_all=all_params, mechanisms=tuple(mechanisms), problem=problem,
     )
+
+
+def _scales(values: dict, free: list, mechanisms) -> np.ndarray:
+    """Working scale of each free parameter: its current size, or its typical one at 0."""
+    return np.array([abs(values[k]) or model.parameter_info(k, mechanisms).typical for k in free])
 
 
 def _as_jnp(values: dict) -> dict:
@@ -658,7 +658,7 @@ class _FullBackend:
 
     def levenberg_marquardt(self, values: dict, free: list, opt: FitOptions):
         mechs = self.problem.mechanisms
-        scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
+        scales = _scales(values, free, mechs)
         ctx = self.problem.ctx(scales)
         y0 = _to_unconstrained(_as_jnp(values), ctx)
         sol = _levenberg_marquardt(y0, ctx, opt.rtol, opt.atol, opt.max_steps)
@@ -678,9 +678,7 @@ class _CompressedCtx(NamedTuple):
 
 
 def _compressed_residual(y, c: _CompressedCtx):
-    pos = np.array(c.positive, dtype=bool)
-    p = jnp.where(pos, jnp.exp(y), y) * c.scales
-    d = p - c.p0
+    d = model.constrain(y, np.array(c.positive, dtype=bool), c.scales) - c.p0
     return c.R0 - c.R1 @ jnp.concatenate([d, d[c.a] * d[c.b] * c.half])
 
 
@@ -725,17 +723,15 @@ class _CompressedBackend:
 
     def levenberg_marquardt(self, values: dict, free: list, opt: FitOptions):
         mechs = self.problem.mechanisms
-        scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
+        scales = _scales(values, free, mechs)
         positive = tuple(bool(model.parameter_info(k, mechs).positive) for k in free)
         c = _CompressedCtx(jnp.asarray(self.R0), jnp.asarray(self.R1), jnp.asarray(self.exp.p0),
                            jnp.asarray(self.exp.a), jnp.asarray(self.exp.b), jnp.asarray(self.exp.half),
                            positive, jnp.asarray(scales))
         pos = np.array(positive)
-        v = np.array([values[k] for k in free]) / scales
-        y0 = jnp.asarray(np.where(pos, np.log(np.where(pos, v, 1.0)), v))
+        y0 = model.unconstrain(jnp.asarray([values[k] for k in free]), pos, c.scales)
         sol = _levenberg_marquardt_compressed(y0, c, opt.rtol, opt.atol, opt.max_steps)
-        y = np.asarray(sol.value)
-        p = np.where(pos, np.exp(y), y) * scales
+        p = np.asarray(model.constrain(sol.value, pos, c.scales))
         new = {k: float(p[i]) for i, k in enumerate(free)}
         return new, int(sol.stats.get("num_steps", 0)), bool(sol.result == optx.RESULTS.successful)
 
@@ -767,7 +763,7 @@ def _solve(problem: _Problem, values: dict, free: list, reasons: dict, opt: FitO
         for _ in range(8):
             backend = _backend(problem, values, free, opt)
             JtJ, Jtr, _ = backend.normal(values)
-            scales = np.array([abs(values[k]) or model.parameter_info(k, mechs).typical for k in free])
+            scales = _scales(values, free, mechs)
             with np.errstate(over="ignore", invalid="ignore"):
                 JtJ, Jtr = JtJ * np.outer(scales, scales), Jtr * scales
             if not (np.all(np.isfinite(JtJ)) and np.all(np.isfinite(Jtr))):

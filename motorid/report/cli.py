@@ -21,14 +21,13 @@ def register(sub):
 
 
 def run_report(args) -> int:
+    from motorid.identify.cli import check_logs_exist
     from motorid.report.html import write_report
 
     out = Path(args.dir)
     if not out.is_dir():
         raise InputError(f"{out}: no such folder")
-    for log in args.logs or []:
-        if not Path(log).exists():
-            raise InputError(f"{log}: no such file")
+    check_logs_exist(args.logs or [])
     existed = (out / "report.html").exists()
     path = write_report(out, logs=args.logs, motor=args.motor)
     print(f"{'replaced' if existed else 'wrote'} {path}")
