@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from pandas.api.types import union_categoricals
 
 from motorid._atomic import write_bytes_atomic
 
@@ -269,7 +270,9 @@ def _parse_body(path: Path, body: str, delim: str, fields: list, found: dict, he
     opts = dict(sep=delim, header=None, names=names, skip_blank_lines=False, skipinitialspace=True,
                 keep_default_na=False, index_col=False, engine="c")
     try:
-        return pd.read_csv(io.StringIO(body), dtype={j: (float if j in numeric else str) for j in names},
+        # bytes, not a StringIO: pandas' C parser would encode the text back to UTF-8 piece by piece
+        return pd.read_csv(io.BytesIO(body.encode("utf-8")), encoding="utf-8",
+                           dtype={j: (float if j in numeric else str) for j in names},
                            na_values={j: _NA_STRINGS for j in numeric}, **opts)
     except ValueError as exc:
         if isinstance(exc, pd.errors.ParserError):
@@ -292,6 +295,16 @@ def _text_codes(column: pd.Series):
     """Text column → (codes, distinct values stripped): the string work is done once per value."""
     codes, uniques = pd.factorize(column.fillna(""), use_na_sentinel=False)
     return codes, np.array([str(u).strip() for u in uniques], dtype=object)
+
+
+def _categorical(values: np.ndarray, codes: np.ndarray) -> pd.Categorical:
+    """Per-row text ``values[codes]`` as a categorical (distinct values may repeat in ``values``)."""
+    value_codes, distinct = pd.factorize(np.asarray(values, dtype=object))
+    return pd.Categorical.from_codes(value_codes[codes], categories=pd.Index(distinct, dtype=object))
+
+
+def _constant_categorical(value: str, n: int) -> pd.Categorical:
+    return pd.Categorical.from_codes(np.zeros(n, dtype=np.int8), categories=pd.Index([value], dtype=object))
 
 
 def _oil_viscosity(spec, temperature_C: np.ndarray) -> np.ndarray:
@@ -353,7 +366,9 @@ def read_log(path, spec=None) -> pd.DataFrame:
         r = mixed.iloc[0]
         names = sorted(set(proto_norm[proto_codes[run_codes == r]]))
         raise InputError(f"{path}: run '{run_values[r]}' has several protocols: {', '.join(names)}")
-    out = pd.DataFrame({"run_id": run_values[run_codes].astype(str), "protocol": proto_norm[proto_codes].astype(str)})
+    # text columns as categoricals: one string per distinct value, not per row
+    out = pd.DataFrame({"run_id": _categorical(run_values, run_codes),
+                        "protocol": _categorical(proto_norm, proto_codes)})
 
     kinematic = None
     for si in FORMAT_COLUMNS:
@@ -421,7 +436,7 @@ def read_log(path, spec=None) -> pd.DataFrame:
             mu = np.where(gaps, _oil_viscosity(spec, np.where(gaps, temp, 40.0)), mu)
     out["viscosity_Pa_s"] = mu
 
-    out["file"] = str(path)
+    out["file"] = _constant_categorical(str(path), len(out))
     out["run"] = out["run_id"]
     for j, name in extras.items():
         key = name if name not in out.columns else f"extra:{name}"
@@ -467,10 +482,14 @@ def read_logs(paths, spec=None) -> pd.DataFrame:
     labels = names if len(set(names)) == len(names) else [str(p) for p in files]
     owners: dict = {}
     for k, f in enumerate(frames):
-        for rid in f["run_id"].unique():
+        for rid in f["run_id"].cat.categories:
             owners.setdefault(rid, set()).add(k)
     for k, f in enumerate(frames):
-        shared = f["run_id"].map(lambda r: len(owners[r]) > 1)
-        f["run"] = np.where(shared, labels[k] + ":" + f["run_id"], f["run_id"])
-    frame = pd.concat(frames, ignore_index=True, sort=False)
-    return frame
+        ids = f["run_id"].cat.categories
+        f["run"] = f["run_id"].cat.rename_categories(
+            [labels[k] + ":" + r if len(owners[r]) > 1 else r for r in ids])
+    text = ("run_id", "protocol", "file", "run")
+    frame = pd.concat([f.drop(columns=list(text)) for f in frames], ignore_index=True, sort=False)
+    for c in text:  # categoricals of different files joined without a string per row
+        frame[c] = union_categoricals([f[c] for f in frames]) if len(frames) > 1 else frames[0][c].array
+    return frame[list(frames[0].columns) + [c for c in frame.columns if c not in frames[0].columns]]

@@ -232,12 +232,27 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
     scale = float(np.median(dt))
     # (for even sampling this is the Savitzky-Golay derivative, edges as its "interp" mode)
     first = np.clip(np.arange(n) - k // 2, 0, n - k)  # windows shift inwards at the ends
-    idx = first[:, None] + np.arange(k)[None, :]
-    x = (t[idx] - t[:, None]) / scale
+    if np.all(np.abs(dt - scale) <= 1e-3 * scale) and n > k:
+        # even sampling (time stamps rounded to a few digits count as even: a 0.1 % jitter
+        # moves the slope by 0.1 % at most): one set of derivative weights for every interior sample
+        x = np.arange(k) - k // 2
+        powers = x[:, None] ** np.arange(3)[None, :]
+        weights = np.linalg.solve(powers.T @ powers, powers.T)[1]
+        out = np.empty(n)
+        out[k // 2:n - k // 2] = np.correlate(w, weights, mode="valid")
+        edge = np.r_[np.arange(k // 2), np.arange(n - k // 2, n)]
+    else:
+        out, edge = None, np.arange(n)
+    idx = first[edge, None] + np.arange(k)[None, :]
+    x = (t[idx] - t[edge, None]) / scale
     powers = x[:, :, None] ** np.arange(3)[None, None, :]  # (n, k, 3): 1, x, x²
     normal = np.einsum("nkp,nkq->npq", powers, powers)
     rhs = np.einsum("nkp,nk->np", powers, w[idx])
-    return np.linalg.solve(normal, rhs[..., None])[:, 1, 0] / scale
+    slope = np.linalg.solve(normal, rhs[..., None])[:, 1, 0]
+    if out is None:
+        return slope / scale
+    out[edge] = slope
+    return out / scale
 
 
 # ----------------------------------------------------------------- breakaway
@@ -285,31 +300,51 @@ def _rest_level(t, w, line: bool, floor: float):
     return (lambda tt: np.polyval(coef, tt - t_ref)), max(sigma, trimmed, 0.5 * quantum, floor)
 
 
+def _hinge_costs(tt, yy, t0):
+    """Least-squares cost of yy ≈ a·u + b·u², u = max(tt − t0, 0), a, b ≥ 0, for each t0.
+
+    The two-column non-negative least squares in closed form, vectorized over
+    ``t0``: the unconstrained solution where both coefficients come out ≥ 0,
+    else the better of the one-column fits (the problem is convex, so the best
+    feasible candidate is the optimum).
+    """
+    u = np.clip(tt[None, :] - np.asarray(t0, dtype=float)[:, None], 0.0, None)
+    v = u * u
+    uu, uv, vv = (u * u).sum(1), (u * v).sum(1), (v * v).sum(1)
+    uy, vy, yy2 = u @ yy, v @ yy, float(yy @ yy)
+    det = uu * vv - uv * uv
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a2 = np.where(det > 0, (vv * uy - uv * vy) / det, -1.0)
+        b2 = np.where(det > 0, (uu * vy - uv * uy) / det, -1.0)
+        a1 = np.where(uu > 0, np.maximum(uy / uu, 0.0), 0.0)
+        b1 = np.where(vv > 0, np.maximum(vy / vv, 0.0), 0.0)
+    both = yy2 - (a2 * uy + b2 * vy)  # at the unconstrained optimum, SSE = yy − cᵀ(Xᵀy)
+    only_a = yy2 - 2 * a1 * uy + a1 * a1 * uu
+    only_b = yy2 - 2 * b1 * vy + b1 * b1 * vv
+    feasible = (a2 >= 0) & (b2 >= 0)
+    return np.maximum(np.minimum(np.where(feasible, both, np.inf), np.minimum(only_a, only_b)), 0.0)
+
+
 def _hinge_onset(t, dev, lo: int, last_rest: int, hi: int) -> float:
     """Onset t0 by fitting dev = a·u + b·u², u = max(t − t0, 0), a, b ≥ 0, over samples lo..hi.
 
     Rest before t0; after it, growth from zero at a rate that does not fall (the
     pressure keeps rising): linear when the static friction exceeds the kinetic
-    one, quadratic when they are equal.
+    one, quadratic when they are equal.  t0 is searched on a grid between
+    sample ``lo`` and the first moving sample, then refined twice on finer grids
+    around the best point (resolution 1/128 000 of that span).
     """
-    from scipy.optimize import minimize_scalar, nnls  # imported here: costs start-up time otherwise
-
     tt, yy = t[lo:hi + 1], dev[lo:hi + 1]
-
-    def sse(t0):
-        u = np.clip(tt - t0, 0.0, None)
-        return float(nnls(np.column_stack([u, u * u]), yy)[1] ** 2)
-
-    lo_t, hi_t = t[lo], t[last_rest + 1]
-    grid = np.linspace(lo_t, hi_t, 81)
-    costs = np.array([sse(g) for g in grid])
-    k = int(np.argmin(costs))
-    a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-    if b > a:
-        res = minimize_scalar(sse, bounds=(a, b), method="bounded", options={"xatol": 1e-6 * (b - a)})
-        if res.fun <= costs[k]:
-            return float(res.x)
-    return float(grid[k])
+    a, b = t[lo], t[last_rest + 1]
+    grid = np.linspace(a, b, 81)
+    best = float(grid[int(np.argmin(_hinge_costs(tt, yy, grid)))])
+    step = (b - a) / 80
+    for _ in range(2):
+        grid = np.linspace(max(best - step, a), min(best + step, b), 81)
+        costs = _hinge_costs(tt, yy, grid)
+        best = float(grid[int(np.argmin(costs))])
+        step = (grid[-1] - grid[0]) / 80
+    return best
 
 
 def find_breakaway(time, speed, rest_speed: float = 2e-3) -> Breakaway:
@@ -518,13 +553,15 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
     settings = settings or ExtractSettings()
     _check_frame(frame)
     _check_spec(spec)
-    keys = (frame["run"] if "run" in frame.columns else frame["run_id"]).astype(str).to_numpy()
-    codes, uniques = pd.factorize(keys)
+    # text columns by their codes (categoricals from read_logs, or plain text): no string per row
+    codes, uniques = pd.factorize(frame["run"] if "run" in frame.columns else frame["run_id"])
+    uniques = [str(u) for u in uniques]
     order = np.lexsort((frame["time_s"].to_numpy(dtype=float), codes))
     bounds = np.searchsorted(codes[order], np.arange(len(uniques) + 1))
     numeric = {c: frame[c].to_numpy(dtype=float) for c in FRAME_NUMERIC}
-    protocols = frame["protocol"].astype(str).to_numpy()
-    files = frame["file"].astype(str).to_numpy() if "file" in frame.columns else np.full(len(frame), "")
+    protocol_codes, protocol_names = pd.factorize(frame["protocol"])
+    file_codes, file_names = (pd.factorize(frame["file"]) if "file" in frame.columns
+                              else (np.zeros(len(frame), int), [""]))
     all_temp = _median(numeric["oil_temp_C"])
 
     excluded: dict = {}
@@ -533,8 +570,8 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
     for r, key in enumerate(uniques):
         pos = order[bounds[r]:bounds[r + 1]]
         cols = {c: v[pos] for c, v in numeric.items()}
-        protocol = protocols[pos[0]]
-        row = {"run": key, "protocol": protocol, "file": files[pos[0]], "n_samples": pos.size, "n_steady": 0,
+        protocol = str(protocol_names[protocol_codes[pos[0]]])
+        row = {"run": key, "protocol": protocol, "file": str(file_names[file_codes[pos[0]]]), "n_samples": pos.size, "n_steady": 0,
                "direction": 0.0, "onset_time_s": math.nan, "excluded": ""}
         used = np.arange(pos.size)
         if protocol == STARTABILITY:
