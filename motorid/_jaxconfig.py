@@ -13,6 +13,7 @@ jax.config.update("jax_enable_x64", True)
 _cache = os.environ.get(
     "MOTORID_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "motorid", "jax")
 )
+CACHE_DIR = _cache  # also holds the serialized executables of motorid._aot
 try:
     os.makedirs(_cache, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", _cache)

@@ -21,11 +21,11 @@ caller uses the full residual.
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from motorid._aot import cached_jit
 from motorid.identify import least_squares as ls
 
 
@@ -34,46 +34,68 @@ def _flat_predictions(vector, names, ctx, order):
     return jnp.concatenate([pred[c] for c in order])
 
 
-_value = eqx.filter_jit(_flat_predictions)
+_value = cached_jit(_flat_predictions)
 
 
-@eqx.filter_jit
-def _value_and_jacobian(vector, names, ctx, order):
-    f = lambda v: _flat_predictions(v, names, ctx, order)  # noqa: E731
-    return f(vector), jax.jacfwd(f)(vector)
+@cached_jit
+def _jacobian(vector, names, ctx, order):
+    return jax.jacfwd(lambda v: _flat_predictions(v, names, ctx, order))(vector)
 
 
-@eqx.filter_jit
-def _second_derivatives(vector, names, ctx, order, pairs_a, pairs_b):
-    f = lambda v: _flat_predictions(v, names, ctx, order)  # noqa: E731
-    eye = jnp.eye(vector.size)
-
-    def one(a, b):
-        return jax.jvp(lambda v: jax.jvp(f, (v,), (eye[a],))[1], (vector,), (eye[b],))[1]
-
-    return jax.vmap(one, out_axes=1)(pairs_a, pairs_b)
-
-
-@eqx.filter_jit
-def _hessian_small(vector, names, ctx, order):
+@cached_jit
+def _hessian(vector, names, ctx, order):
     return jax.hessian(lambda v: _flat_predictions(v, names, ctx, order))(vector)
 
 
-def _slice_ctx(ctx, n: int):
-    """The same context on the first ``n`` cells and events (to find the pairs cheaply)."""
-    cut = lambda s: None if s is None else jax.tree_util.tree_map(lambda a: a[:n], s)  # noqa: E731
-    return ctx._replace(running=cut(ctx.running), events=cut(ctx.events))
+@cached_jit
+def _channel_terms(vector, names, ctx, channels, columns, pairs):
+    """Per channel: its predictions f0 (n,), their first derivatives along the
+    channel's ``columns`` (k, n) and second derivatives along its ``pairs`` (K, n).
+
+    One channel at a time, so that XLA prunes the other channels' arithmetic and
+    no tangent is spent on a parameter the channel does not depend on.
+    """
+    eye = jnp.eye(vector.size)
+    out = {}
+    for c, cols, prs in zip(channels, columns, pairs):
+        def f(v, c=c):
+            return ls._predictions({k: v[i] for i, k in enumerate(names)}, ctx)[c]
+
+        value = f(vector)
+        jvp = lambda t, f=f: jax.jvp(f, (vector,), (t,))[1]  # noqa: E731
+        first = jax.vmap(jvp)(eye[np.array(cols, dtype=int)]) if cols else jnp.zeros((0, value.size))
+        if prs:
+            a, b = (np.array([q[i] for q in prs], dtype=int) for i in (0, 1))
+            second = jax.vmap(lambda ta, tb, f=f: jax.jvp(lambda v: jax.jvp(f, (v,), (ta,))[1],
+                                                          (vector,), (tb,))[1])(eye[a], eye[b])
+        else:
+            second = jnp.zeros((0, value.size))
+        out[c] = (value, first, second)
+    return out
+
+
+def _sample_ctx(ctx, cells: np.ndarray):
+    """The same context on a few cells spread over every run (and all events)."""
+    running = None if ctx.running is None else jax.tree_util.tree_map(lambda a: np.asarray(a)[cells], ctx.running)
+    return ctx._replace(running=running, observed={}, weights={})
 
 
 class Expansion:
-    """f0, J and the non-zero second derivatives of the cell predictions at p0."""
+    """f0, J and the non-zero second derivatives of the cell predictions at p0.
 
-    def __init__(self, names, p0, order, f0, J, H, pairs):
+    Held per channel, on the channel's real cells only (padding dropped), and
+    only over the columns that channel depends on (torque does not depend on the
+    leakage, nor the flows on the friction): the Gram matrix of the compression
+    then costs a few columns per channel instead of all of them.
+    """
+
+    def __init__(self, names, p0, order, pairs, blocks: dict):
         self.names, self.p0, self.order = list(names), np.asarray(p0), tuple(order)
-        self.f0, self.J, self.H, self.pairs = f0, J, H, pairs
+        self.pairs = pairs
         self.a = np.array([a for a, _ in pairs], dtype=int)
         self.b = np.array([b for _, b in pairs], dtype=int)
         self.half = np.array([0.5 if a == b else 1.0 for a, b in pairs])
+        self.blocks = blocks  # channel -> (real rows, columns of [δ; u], (k, rows) derivatives, f0)
 
     @classmethod
     def build(cls, problem, values: dict, free: list, tol: float = 1e-9):
@@ -81,53 +103,95 @@ class Expansion:
         ctx = problem.ctx()
         order = tuple(c for c in ls.CHANNELS if c in ctx.observed)
         names = tuple(free)
+        p = len(names)
         p0 = jnp.asarray([values[k] for k in names], dtype=jnp.float64)
+        # which parameters each channel depends on, and the products: on a few cells
+        # of every run (a dependency missed here fails the exactness check below)
+        n_cells = problem.n_real("torque") if problem.has_running else 0
+        cells = np.unique(np.linspace(0, max(n_cells - 1, 0), min(n_cells, 256)).astype(int))
+        small = _sample_ctx(ctx, cells)
+        small_order = tuple(c for c in order if c != "breakaway" or small.events is not None)
+        sizes = {c: (cells.size if c != "breakaway" else int(np.asarray(ctx.observed[c]).size)) for c in order}
         if not problem.mechanisms:
             # the 1992 model's own products: K_L0 with each Fourier coefficient, T_Fc with K_s
-            # (the exactness check below would catch any other)
             products = [("KL0", k) for k in names if k.startswith("KL_")] + [("TFc", "Ks")]
             pairs = sorted((min(names.index(a), names.index(b)), max(names.index(a), names.index(b)))
                            for a, b in products if a in names and b in names)
         else:
-            Hs = np.asarray(_hessian_small(p0, names, _slice_ctx(ctx, 64), order))
-            pairs = [(a, b) for a in range(len(names)) for b in range(a, len(names))
+            Hs = np.asarray(_hessian(p0, names, small, small_order))
+            pairs = [(a, b) for a in range(p) for b in range(a, p)
                      if np.any(Hs[:, a, b] != 0) or np.any(Hs[:, b, a] != 0)]
-        f0, J = (np.asarray(x) for x in _value_and_jacobian(p0, names, ctx, order))
-        if pairs:
-            H = np.asarray(_second_derivatives(p0, names, ctx, order, jnp.asarray([a for a, _ in pairs]),
-                                               jnp.asarray([b for _, b in pairs])))
-        else:
-            H = np.zeros((f0.size, 0))
-        exp = cls(names, p0, order, f0, J, H, pairs)
-        # exact? compare with the model itself at two points well away from p0
+        Js = np.asarray(_jacobian(p0, names, small, small_order))
+        columns, channel_pairs, start = [], [], 0
+        for c in order:
+            rows = Js[start:start + sizes[c]]
+            start += sizes[c]
+            used = np.any((rows != 0) & np.isfinite(rows), axis=0)
+            columns.append(tuple(int(i) for i in np.flatnonzero(used)))
+            channel_pairs.append(tuple((a, b) for a, b in pairs if used[a] and used[b]))
+        terms = _channel_terms(p0, names, ctx, order, tuple(columns), tuple(channel_pairs))
+        blocks = {}
+        for c, cols, prs in zip(order, columns, channel_pairs):
+            n_real = problem.n_real(c)
+            f0, first, second = (np.asarray(x)[..., :n_real] for x in terms[c])
+            X = np.concatenate([first, second]) if second.size else first
+            nz = np.array(list(cols) + [p + pairs.index(q) for q in prs], dtype=int)
+            blocks[c] = (n_real, nz, np.ascontiguousarray(np.where(np.isfinite(X), X, 0.0)),
+                         np.where(np.isfinite(f0), f0, 0.0))
+        exp = cls(names, p0, order, pairs, blocks)
+        # exact? compare with the model itself, on the sampled cells, at two points well
+        # away from p0 (a term of higher order would show at any generic point)
         rng = np.random.default_rng(0)
         scale = np.where(np.asarray(p0) != 0, np.abs(np.asarray(p0)), 1.0)
+        rows_of = {c: (cells if c != "breakaway" else np.arange(problem.n_real(c))) for c in order}
         for _ in range(2):
-            delta = 0.3 * scale * rng.standard_normal(len(names))
-            full = np.asarray(_value(p0 + delta, names, ctx, order))
-            if np.max(np.abs(full - exp.predict(delta))) > tol * (np.max(np.abs(full)) + 1e-300):
+            delta = 0.3 * scale * rng.standard_normal(p)
+            full = np.asarray(_value(p0 + delta, names, small, small_order))
+            start, worst, size_ = 0, 0.0, 0.0
+            for c in order:
+                want = full[start:start + rows_of[c].size]
+                start += sizes[c]
+                got = exp.predict_channel(c, delta, rows_of[c])
+                ok = np.isfinite(want)
+                if ok.any():
+                    worst = max(worst, float(np.max(np.abs(got[ok] - want[ok]))))
+                    size_ = max(size_, float(np.max(np.abs(want[ok]))))
+            if not worst <= tol * (size_ + 1e-300):
                 return None
         return exp
 
     def products(self, delta):
         return delta[..., self.a] * delta[..., self.b] * self.half
 
-    def predict(self, delta):
-        delta = np.asarray(delta)
-        return self.f0 + self.J @ delta + (self.H @ self.products(delta) if self.pairs else 0.0)
+    def predict_channel(self, channel: str, delta, rows=slice(None)):
+        """The expansion's prediction of one channel's real cells (or ``rows`` of them) at p0 + δ."""
+        delta = np.asarray(delta, dtype=float)
+        z = np.concatenate([delta, self.products(delta)])
+        n_real, nz, X, f0 = self.blocks[channel]
+        return f0[rows] + z[nz] @ X[:, rows]
 
     def compress(self, observed: dict, weights: dict):
         """(R0, R1): |w(y − f(p0+δ))| = |R0 − R1 [δ; u(δ)]| for every δ."""
-        y = np.concatenate([np.asarray(observed[c]) for c in self.order])
-        w = np.concatenate([np.asarray(weights[c]) for c in self.order])
-        keep = w != 0  # padding and rejected samples carry no weight
-        w, y = w[keep], y[keep]
-        cols = np.column_stack([w * (y - self.f0[keep]), w[:, None] * self.J[keep], w[:, None] * self.H[keep]])
-        # any R with RᵀR = colsᵀcols will do: the symmetric square root of the Gram
-        # matrix, on unit-norm columns (cheaper than QR of the tall matrix, as exact)
-        norms = np.linalg.norm(cols, axis=0)
+        m = 1 + len(self.names) + len(self.pairs)
+        gram = np.zeros((m, m))
+        for c in self.order:
+            n_real, nz, X, f0 = self.blocks[c]
+            w = np.asarray(weights[c])[:n_real]
+            y = np.asarray(observed[c])[:n_real]
+            r = w * np.where(w != 0, y - f0, 0.0)  # rejected samples: weight 0, any value
+            Xw = X * w
+            idx = 1 + nz
+            # einsum, not BLAS: a multi-threaded BLAS on these few long rows loses more to
+            # waking its threads (and fighting XLA's) than the products cost
+            gram[0, 0] += np.einsum("n,n->", r, r)
+            g = np.einsum("in,n->i", Xw, r)
+            gram[0, idx] += g
+            gram[idx, 0] += g
+            gram[np.ix_(idx, idx)] += np.einsum("in,jn->ij", Xw, Xw)
+        # any R with RᵀR = Gram will do: its symmetric square root, on unit-norm
+        # columns (cheaper than QR of the tall matrix, as exact)
+        norms = np.sqrt(np.clip(np.diag(gram), 0.0, None))
         norms = np.where(norms > 0, norms, 1.0)
-        gram = (cols / norms).T @ (cols / norms)
-        lam, vec = np.linalg.eigh(gram)
+        lam, vec = np.linalg.eigh(gram / np.outer(norms, norms))
         R = (np.sqrt(np.clip(lam, 0.0, None))[:, None] * vec.T) * norms
         return R[:, 0], R[:, 1:]

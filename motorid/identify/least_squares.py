@@ -26,6 +26,7 @@ import numpy as np
 import optimistix as optx
 
 from motorid import model
+from motorid._aot import cached_jit
 from motorid.model import Samples
 
 RUNNING_CHANNELS = ("torque", "q_a", "q_b", "q_case")
@@ -39,7 +40,7 @@ class FitOptions:
 
     harmonics: int | None = None  # order M of K_L(θ); default: the spec's
     outlier_sigma: float = 5.0  # reject residuals beyond this many σ
-    rounds: int = 4  # noise/outlier re-estimation rounds
+    rounds: int = 2  # noise/outlier re-estimation rounds (robust start, then settled)
     rtol: float = 1e-9
     atol: float = 1e-9
     max_steps: int = 200
@@ -186,12 +187,19 @@ def _by_run(values, run_of_sample, n_runs):
 
 
 def _initial_noise(values, run_of_sample, n_runs) -> np.ndarray:
-    """σ per run from first differences within the run (model-free start)."""
-    out = np.full(n_runs, np.nan)
-    for r, v in _by_run(values, run_of_sample, n_runs):
-        if v.size >= 3:
-            out[r] = _robust_std(np.diff(v)) / np.sqrt(2.0)
-    return out
+    """σ per run from first differences within the run (model-free start).
+
+    The RMS of the differences over √2; a spike inflates its run's σ, which only
+    lowers that run's weight in the first round (the residual MAD takes over after).
+    """
+    v = np.asarray(values, dtype=float)
+    same = run_of_sample[1:] == run_of_sample[:-1]
+    d = np.diff(v)
+    ok = same & np.isfinite(d)
+    runs = run_of_sample[1:][ok]
+    count = np.bincount(runs, minlength=n_runs)
+    ss = np.bincount(runs, weights=d[ok] ** 2, minlength=n_runs)
+    return np.where(count >= 2, np.sqrt(ss / np.maximum(count, 1) / 2.0), np.nan)
 
 
 def _spikiness(res, run_of, channel: str) -> np.ndarray:
@@ -210,17 +218,31 @@ def _spikiness(res, run_of, channel: str) -> np.ndarray:
     starts = np.r_[0, np.flatnonzero(np.diff(run_of)) + 1]
     first = np.repeat(starts, np.diff(np.r_[starts, n]))
     last = np.repeat(np.r_[starts[1:], n] - 1, np.diff(np.r_[starts, n]))
-    window = np.clip(idx[:, None] + np.arange(-2, 3)[None, :], first[:, None], last[:, None])
-    vals = res[window]
-    if np.isnan(vals).any():
+    cols = [res[np.clip(idx + j, first, last)] for j in range(-2, 3)]
+    if np.isnan(res).any():
         import warnings
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a window of missing readings
-            med = np.nanmedian(vals, axis=1)
+            med = np.nanmedian(np.stack(cols, axis=1), axis=1)
     else:
-        med = np.median(vals, axis=1)
+        med = _median_of_five(*cols)
     return res - med
+
+
+def _median_of_five(a, b, c, d, e):
+    """Elementwise median of five arrays by a selection network (no sort, no gather).
+
+    With a ≤ b and c ≤ d, min(a, c) lies below three others and max(b, d) above
+    three others, so neither can be the median, and dropping one value on each
+    side of it keeps it: the median of five is the median of max(a, c),
+    min(b, d) and e.
+    """
+    a, b = np.minimum(a, b), np.maximum(a, b)
+    c, d = np.minimum(c, d), np.maximum(c, d)
+    x, y = np.maximum(a, c), np.minimum(b, d)
+    lo, hi = np.minimum(x, y), np.maximum(x, y)
+    return np.maximum(lo, np.minimum(hi, e))
 
 
 def _residual_noise(res, run_of_sample, n_runs, robust: bool) -> np.ndarray:
@@ -231,10 +253,18 @@ def _residual_noise(res, run_of_sample, n_runs, robust: bool) -> np.ndarray:
     Gaussian noise (a short run's σ, and so its weight, scatters less).
     """
     out = np.full(n_runs, np.nan)
-    for r, v in _by_run(res, run_of_sample, n_runs):
-        if v.size >= 5:
-            out[r] = _robust_std(v) if robust else float(np.std(v, ddof=1))
-    return out
+    if robust:
+        for r, v in _by_run(res, run_of_sample, n_runs):
+            if v.size >= 5:
+                out[r] = _robust_std(v)
+        return out
+    # standard deviation per run in two vectorized passes (mean, then squares about it)
+    ok = np.isfinite(res)
+    runs, x = run_of_sample[ok], res[ok]
+    count = np.bincount(runs, minlength=n_runs)
+    mean = np.bincount(runs, weights=x, minlength=n_runs) / np.maximum(count, 1)
+    ss = np.bincount(runs, weights=(x - mean[runs]) ** 2, minlength=n_runs)
+    return np.where(count >= 5, np.sqrt(ss / np.maximum(count - 1, 1)), np.nan)
 
 
 def _floor_noise(sig_runs: np.ndarray, measured: np.ndarray) -> np.ndarray:
@@ -317,7 +347,7 @@ def _normal_equations(values: dict, ctx: _Ctx):
     jac = jax.jacfwd(_residual_natural)(values, ctx)
     J = jnp.stack([jac[k] for k in ctx.free], axis=1)
     return J.T @ J, J.T @ r, r @ r
-_predictions_jit = eqx.filter_jit(_predictions)
+_predictions_jit = cached_jit(_predictions)
 
 
 @eqx.filter_jit
@@ -377,8 +407,10 @@ class _Problem:
             theta = np.mod(np.asarray(data.running.theta), 2 * np.pi)
             b = np.minimum((theta / (2 * np.pi) * bins).astype(np.int64), bins - 1)
             key = self.run_of.astype(np.int64) * bins + b
-            _, self.cell_of = np.unique(key, return_inverse=True)
-            self.n_cells = int(self.cell_of.max()) + 1
+            # cells numbered in key order: a counting pass instead of a sort
+            occupied = np.bincount(key, minlength=int(key.max()) + 1) > 0
+            self.cell_of = (np.cumsum(occupied) - 1)[key]
+            self.n_cells = int(occupied.sum())
             counts = np.bincount(self.cell_of, minlength=self.n_cells).astype(float)
             self.cell_run = np.zeros(self.n_cells, int)
             self.cell_run[self.cell_of] = self.run_of
@@ -396,6 +428,10 @@ class _Problem:
             self.n_events = int(self.held_torque.size)
             self.events_padded = pad_samples(data.events, bucket(self.n_events, 16))
         self.cells = None
+
+    def n_real(self, channel: str) -> int:
+        """How many of a channel's (padded) cells or events are real."""
+        return getattr(self, "n_events", 0) if channel == "breakaway" else self.n_cells
 
     def observed(self):
         out = dict(self.measured)
@@ -682,10 +718,12 @@ def _compressed_residual(y, c: _CompressedCtx):
     return c.R0 - c.R1 @ jnp.concatenate([d, d[c.a] * d[c.b] * c.half])
 
 
-@eqx.filter_jit
+@cached_jit
 def _levenberg_marquardt_compressed(y0, c: _CompressedCtx, rtol, atol, max_steps):
+    """Optimistix LM on the compressed residual → (y, steps, converged) (arrays only: kept on disk)."""
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    return optx.least_squares(_compressed_residual, solver, y0, args=c, max_steps=max_steps, throw=False)
+    sol = optx.least_squares(_compressed_residual, solver, y0, args=c, max_steps=max_steps, throw=False)
+    return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
 
 class _CompressedBackend:
@@ -730,10 +768,10 @@ class _CompressedBackend:
                            positive, jnp.asarray(scales))
         pos = np.array(positive)
         y0 = model.unconstrain(jnp.asarray([values[k] for k in free]), pos, c.scales)
-        sol = _levenberg_marquardt_compressed(y0, c, opt.rtol, opt.atol, opt.max_steps)
-        p = np.asarray(model.constrain(sol.value, pos, c.scales))
+        y, steps, ok = _levenberg_marquardt_compressed(y0, c, opt.rtol, opt.atol, opt.max_steps)
+        p = np.asarray(model.constrain(y, pos, c.scales))
         new = {k: float(p[i]) for i, k in enumerate(free)}
-        return new, int(sol.stats.get("num_steps", 0)), bool(sol.result == optx.RESULTS.successful)
+        return new, int(steps), bool(ok)
 
 
 def _backend(problem: _Problem, values: dict, free: list, opt: FitOptions):

@@ -1,0 +1,193 @@
+"""Compiled functions kept on disk, so that a second CLI run neither traces nor compiles.
+
+JAX's persistent compilation cache (:mod:`motorid._jaxconfig`) saves the XLA
+compile, but every fresh process still traces the Python function and lowers it
+to HLO before it can even look the compile up: for the fit's few functions that
+is over a second per ``motorid fit``.  :func:`cached_jit` keeps the *compiled
+executable* instead (``jax.experimental.serialize_executable``), keyed by
+everything the program depends on:
+
+- the function's name and the source of the whole motorid package (any edit
+  makes new keys), the jax/jaxlib versions and the device;
+- the static part of the arguments (everything that is not an array: the motor
+  spec, parameter names, tolerances), by ``repr``;
+- the shapes and dtypes of the array arguments (arrays are padded to powers of
+  two by the callers, so few shapes occur).
+
+Semantics are those of ``equinox.filter_jit``: arrays (NumPy or JAX) are traced,
+every other leaf is static.  Outputs must be pytrees of arrays.  Anything that
+cannot be kept safely — a static argument whose ``repr`` holds a memory address,
+a program with a host callback, a cache folder that cannot be written, a file
+that does not load — falls back to compiling in memory, with the same result.
+Files live in ``$MOTORID_CACHE_DIR/aot`` beside the XLA cache (a few hundred kB
+each); delete the folder to clear them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+import platform
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from motorid import _jaxconfig
+
+_PACKAGE = Path(__file__).resolve().parent
+_version: str | None = None
+
+
+def _fingerprint() -> str:
+    """Hash of the motorid sources, the JAX versions and the machine the executables run on."""
+    global _version
+    if _version is None:
+        h = hashlib.sha256()
+        for path in sorted(_PACKAGE.rglob("*.py")):
+            h.update(str(path.relative_to(_PACKAGE)).encode())
+            h.update(path.read_bytes())
+        import jaxlib
+
+        device = jax.devices()[0]
+        h.update(f"{jax.__version__} {jaxlib.__version__} {device.platform} {device.device_kind} "
+                 f"{platform.machine()} {_cpu_flags()}".encode())
+        _version = h.hexdigest()
+    return _version
+
+
+def _cpu_flags() -> str:
+    """The host CPU's feature flags (an executable compiled for AVX-512 must not load elsewhere)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith(("flags", "Features")):
+                    return line.strip()
+    except OSError:
+        pass
+    return platform.processor()
+
+
+def _is_array(x) -> bool:
+    return isinstance(x, (np.ndarray, jax.Array))
+
+
+def _folder() -> Path | None:
+    folder = Path(_jaxconfig.CACHE_DIR) / "aot"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    return folder if os.access(folder, os.W_OK) else None
+
+
+_lapack_ready = False
+
+
+def _load(path: Path):
+    """A compiled executable from disk, or None."""
+    global _lapack_ready
+    from jax.experimental import serialize_executable
+
+    try:
+        data, in_tree, out_tree = pickle.loads(path.read_bytes())
+        if not _lapack_ready:
+            # the LAPACK kernels (QR, Cholesky, eigh) register with XLA on the first
+            # lowering that needs them; a deserialized program skips that step
+            from jax._src.lax.linalg import initialize_lapack
+
+            initialize_lapack()
+            _lapack_ready = True
+        return serialize_executable.deserialize_and_load(data, in_tree, out_tree)
+    except Exception:  # noqa: BLE001 - a stale or foreign file: compile instead
+        return None
+
+
+def _save(path: Path, compiled, hlo_text: str) -> None:
+    if "callback" in hlo_text:  # a host callback points into this process: not portable
+        return
+    from jax.experimental import serialize_executable
+
+    from motorid._atomic import write_bytes_atomic
+
+    try:
+        write_bytes_atomic(path, pickle.dumps(serialize_executable.serialize(compiled)))
+    except Exception:  # noqa: BLE001 - not serializable or not writable: memory only
+        pass
+
+
+class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
+    """``equinox.filter_jit`` whose compiled programs persist across processes (module docstring)."""
+
+    def __init__(self, fun):
+        self.fun = fun
+        self.name = f"{fun.__module__}.{fun.__qualname__}"
+        self._memory: dict = {}
+        self.__wrapped__ = fun
+        self.__doc__ = fun.__doc__
+
+    def __call__(self, *args):
+        leaves, treedef = jax.tree_util.tree_flatten(args)
+        dynamic = [i for i, x in enumerate(leaves) if _is_array(x)]
+        static = tuple(None if _is_array(x) else x for x in leaves)
+        avals = tuple((np.shape(leaves[i]), str(leaves[i].dtype), bool(getattr(leaves[i], "weak_type", False)))
+                      for i in dynamic)
+        key = (treedef, static, avals)
+        try:
+            compiled = self._memory.get(key)
+        except TypeError:  # an unhashable static leaf: no caching at all
+            return jax.jit(lambda dyn: self._call_flat(dyn, leaves, dynamic, treedef))(
+                [leaves[i] for i in dynamic])
+        dyn = [leaves[i] for i in dynamic]
+        if compiled is None:
+            compiled, path = self._compile(key, leaves, dynamic, treedef)
+            if path is not None:  # loaded from disk: its first run must succeed, else compile afresh
+                try:
+                    out = jax.block_until_ready(compiled(dyn))
+                except Exception:  # noqa: BLE001 - a broken file
+                    path.unlink(missing_ok=True)
+                    compiled, _ = self._compile(key, leaves, dynamic, treedef, use_disk=False)
+                    out = compiled(dyn)
+                self._memory[key] = compiled
+                return out
+            self._memory[key] = compiled
+        return compiled(dyn)
+
+    def _call_flat(self, dyn, leaves, dynamic, treedef):
+        full = list(leaves)
+        for i, x in zip(dynamic, dyn):
+            full[i] = x
+        return self.fun(*jax.tree_util.tree_unflatten(treedef, full))
+
+    def _compile(self, key, leaves, dynamic, treedef, use_disk=True):
+        """(compiled program, the file it was loaded from or None)."""
+        treedef_, static, avals = key
+        text = repr((self.name, str(treedef_), static, avals))
+        folder = None if " at 0x" in text or not use_disk else _folder()
+        path = None
+        if folder is not None:
+            digest = hashlib.sha256((_fingerprint() + text).encode()).hexdigest()[:40]
+            path = folder / f"{self.fun.__name__}-{digest}.bin"
+            if path.exists():
+                loaded = _load(path)
+                if loaded is not None:
+                    return loaded, path
+        skeleton = list(leaves)
+        for i in dynamic:  # the traced function must not hold on to this call's data
+            skeleton[i] = None
+        lowered = jax.jit(lambda dyn: self._call_flat(dyn, skeleton, dynamic, treedef)).lower(
+            [jax.ShapeDtypeStruct(np.shape(leaves[i]), leaves[i].dtype,
+                                  weak_type=bool(getattr(leaves[i], "weak_type", False))) for i in dynamic])
+        if path is None:
+            return lowered.compile(), None
+        # an executable that came out of JAX's persistent compile cache serializes without
+        # its kernels: compile this one afresh (once; later runs load it from disk)
+        enabled = jax.config.jax_enable_compilation_cache
+        try:
+            jax.config.update("jax_enable_compilation_cache", False)
+            compiled = lowered.compile()
+        finally:
+            jax.config.update("jax_enable_compilation_cache", enabled)
+        _save(path, compiled, lowered.as_text())
+        return compiled, None
