@@ -81,16 +81,26 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
+#: the fit's compiled programs, by module: (module, attribute, what it does)
+_PROGRAMS = (
+    ("motorid.identify.compress", "_channel_terms", "expansion: f0, J, H per channel (once a fit)"),
+    ("motorid.identify.compress", "_jacobian", "which parameters each channel depends on (256 cells)"),
+    ("motorid.identify.compress", "_value", "exactness check of the expansion (256 cells, 2 points)"),
+    ("motorid.identify.least_squares", "_levenberg_marquardt_compressed", "optimistix LM on the compressed residual"),
+    ("motorid.identify.least_squares", "_predictions_jit", "per-sample predictions (noise, outliers, residuals)"),
+)
+
+
 def _fit_breakdown(data, spec):
-    """Where a warm ``fit_least_squares`` spends its time: its jitted calls, timed
-    (synchronized) by wrapping them for one extra fit; the rest is numpy/pandas."""
+    """Where a warm ``fit_least_squares`` spends its time: its compiled programs, timed
+    (synchronized) by wrapping them for one extra fit; the rest is numpy."""
+    import importlib
+
     import jax
 
-    from motorid.identify import least_squares as L
-
-    names = ("_levenberg_marquardt", "_normal_equations", "_residual_jit", "_predictions_jit")
-    acc = {n: [0, 0.0] for n in names}
-    saved = {n: getattr(L, n) for n in names}
+    acc = {name: [0, 0.0, what] for _, name, what in _PROGRAMS}
+    saved = [(importlib.import_module(m), name) for m, name, _ in _PROGRAMS]
+    originals = [getattr(mod, name) for mod, name in saved]
 
     def wrap(name, f):
         def g(*a, **k):
@@ -102,14 +112,16 @@ def _fit_breakdown(data, spec):
         return g
 
     try:
-        for n in names:
-            setattr(L, n, wrap(n, saved[n]))
+        for (mod, name), f in zip(saved, originals):
+            setattr(mod, name, wrap(name, f))
+        from motorid.identify import least_squares as L
+
         t0 = time.perf_counter()
         L.fit_least_squares(data, spec)
         total = time.perf_counter() - t0
     finally:
-        for n, f in saved.items():
-            setattr(L, n, f)
+        for (mod, name), f in zip(saved, originals):
+            setattr(mod, name, f)
     return acc, total
 
 
@@ -218,10 +230,10 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
         f"| Bayesian fit converged within 60 s (end to end) | {bayes_s:.1f} s, converged: {mcmc['converged']} | — | — "
         f"| {ok(bayes_s <= 60 and mcmc['converged'])} |",
         "",
-        f"The end-to-end goal needs ≤ {base_e2e[1] / 2:.1f} s; start-up and imports "
-        f"({startup_s:.1f} s) plus the warm fit step ({fit_s:.1f} s) alone take "
-        f"{startup_s + fit_s:.1f} s, so faster reading ({read_s:.1f} s) or extraction ({extract_s:.1f} s) "
-        "cannot meet it: the fit step is what must become faster (see below).",
+        f"The end-to-end goal needs ≤ {base_e2e[1] / 2:.2f} s. A second run neither traces nor compiles: "
+        "the fit's compiled programs are kept on disk (`motorid._aot`, serialized XLA executables keyed by "
+        "the motorid sources, the JAX version, the machine and the argument shapes), so it pays start-up "
+        "and imports, reading, extraction and the fit itself.",
         "",
         "### Seconds",
         "",
@@ -235,7 +247,7 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
         f"| end to end, first run (empty compile cache) | {e2e[0]:.1f} s | {base_e2e[0]:.1f} s |",
         f"| end to end, second run | {e2e[1]:.1f} s | {base_e2e[1]:.1f} s |",
         f"| of which process start + imports (`python -m motorid --help`) | {startup_s:.1f} s | — |",
-        f"| of which the rest (first-call trace/cache load, per-sample predictions, writing) | "
+        f"| of which the rest (loading the compiled programs, writing) | "
         f"{max(e2e[1] - startup_s - read_s - extract_s - fit_s, 0):.1f} s | — |",
         f"| `motorid fit --bayes` end to end | {bayes_s:.1f} s | — |",
         f"| of which emcee | {mcmc['seconds']:.1f} s: {mcmc['steps']} steps × {mcmc['walkers']} walkers, "
@@ -246,22 +258,27 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
         "",
         "### Where the fit step's time goes",
         "",
-        f"One more warm `fit_least_squares` ({parts_total:.2f} s) with its jitted calls timed "
+        f"One more warm `fit_least_squares` ({parts_total:.2f} s) with its compiled programs timed "
         "(`jax.block_until_ready`):",
         "",
         "| part | calls | seconds | share |",
         "|---|---:|---:|---:|",
-        *[f"| `{k}` | {c} | {t:.2f} | {100 * t / parts_total:.0f} % |" for k, (c, t) in parts.items()],
-        f"| the rest: noise and outlier re-estimation over the samples (numpy, pandas rolling), cells | — | "
-        f"{parts_total - sum(t for _, t in parts.values()):.2f} | "
-        f"{100 * (1 - sum(t for _, t in parts.values()) / parts_total):.0f} % |",
+        *[f"| `{k}`: {what} | {c} | {t:.3f} | {100 * t / parts_total:.0f} % |"
+          for k, (c, t, what) in parts.items()],
+        f"| the rest (numpy): cells, noise per run, Hampel test, Gram matrices, covariance | — | "
+        f"{parts_total - sum(t for _, t, _ in parts.values()):.3f} | "
+        f"{100 * (1 - sum(t for _, t, _ in parts.values()) / parts_total):.0f} % |",
         "",
-        f"Optimistix Levenberg-Marquardt over {n:,} cell means (padded to {ls.problem.cell_size:,}) costs "
-        f"{1e3 * parts['_levenberg_marquardt'][1] / max(ls.steps, 1):.0f} ms a step over {ls.steps} steps, "
-        f"about as much as one evaluation of JᵀJ, Jᵀr over all cells "
-        f"({1e3 * parts['_normal_equations'][1] / max(parts['_normal_equations'][0], 1):.0f} ms). "
-        "The baseline does the same job with finite differences on the raw samples in about the same time: "
-        "on this machine the cell reduction does not pay for the per-step cost of the solver.",
+        f"How: the samples are reduced once to {n:,} shaft-angle cell means; the 1992 model is exactly "
+        "quadratic in its parameters, so one pass of forward-mode JAX over the cells (each channel along "
+        "only the parameters it depends on) gives an exact expansion, and each noise/outlier round "
+        "compresses the weighted problem to a residual of "
+        f"{1 + len(ls.free) + len(ls.problem._expansion.pairs) if ls.problem._expansion else '—'} rows "
+        "(a Gram matrix, per channel over its few columns) on which optimistix Levenberg-Marquardt takes "
+        f"{ls.steps} steps in about a millisecond. What is left grows with the samples: per-sample "
+        "predictions for the residuals, per-run noise and the Hampel outlier test, two rounds and the final "
+        "one. The baseline evaluates its model at every sample for every finite-difference column of every "
+        "step.",
         "",
         "### Same answers?",
         "",

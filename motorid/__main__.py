@@ -1,5 +1,3 @@
-import sys
+from motorid.cli import console
 
-from motorid.cli import main
-
-sys.exit(main())
+console()

@@ -19,8 +19,9 @@ every other leaf is static.  Outputs must be pytrees of arrays.  Anything that
 cannot be kept safely — a static argument whose ``repr`` holds a memory address,
 a program with a host callback, a cache folder that cannot be written, a file
 that does not load — falls back to compiling in memory, with the same result.
-Files live in ``$MOTORID_CACHE_DIR/aot`` beside the XLA cache (a few hundred kB
-each); delete the folder to clear them.
+Files live in ``$MOTORID_CACHE_DIR/aot/<source version>/`` beside the XLA
+cache (30-200 kB each); the folders of all but the last few source versions are
+removed as new ones appear; delete the folder to clear them.
 """
 
 from __future__ import annotations
@@ -73,10 +74,24 @@ def _is_array(x) -> bool:
     return isinstance(x, (np.ndarray, jax.Array))
 
 
+KEEP_VERSIONS = 4  # folders of other source versions kept (other checkouts may share the cache)
+
+
 def _folder() -> Path | None:
-    folder = Path(_jaxconfig.CACHE_DIR) / "aot"
+    """This source version's folder; made on first use, when the oldest other versions go."""
+    root = Path(_jaxconfig.CACHE_DIR) / "aot"
+    folder = root / _fingerprint()[:20]
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        if not folder.is_dir():
+            folder.mkdir(parents=True, exist_ok=True)
+            others = sorted((p for p in root.iterdir() if p.is_dir() and p != folder),
+                            key=lambda p: p.stat().st_mtime, reverse=True)
+            for old in others[KEEP_VERSIONS:]:
+                for f in old.iterdir():
+                    f.unlink(missing_ok=True)
+                old.rmdir()
+            for stray in root.glob("*.bin"):  # files of the flat layout of earlier versions
+                stray.unlink(missing_ok=True)
     except OSError:
         return None
     return folder if os.access(folder, os.W_OK) else None
@@ -91,8 +106,8 @@ def _load(path: Path):
     from jax.experimental import serialize_executable
 
     try:
-        data, in_tree, out_tree = pickle.loads(path.read_bytes())
-        if not _lapack_ready:
+        data, in_tree, out_tree, uses_lapack = pickle.loads(path.read_bytes())
+        if uses_lapack and not _lapack_ready:
             # the LAPACK kernels (QR, Cholesky, eigh) register with XLA on the first
             # lowering that needs them; a deserialized program skips that step
             from jax._src.lax.linalg import initialize_lapack
@@ -112,7 +127,8 @@ def _save(path: Path, compiled, hlo_text: str) -> None:
     from motorid._atomic import write_bytes_atomic
 
     try:
-        write_bytes_atomic(path, pickle.dumps(serialize_executable.serialize(compiled)))
+        data, in_tree, out_tree = serialize_executable.serialize(compiled)
+        write_bytes_atomic(path, pickle.dumps((data, in_tree, out_tree, "lapack" in hlo_text)))
     except Exception:  # noqa: BLE001 - not serializable or not writable: memory only
         pass
 
@@ -167,7 +183,7 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
         folder = None if " at 0x" in text or not use_disk else _folder()
         path = None
         if folder is not None:
-            digest = hashlib.sha256((_fingerprint() + text).encode()).hexdigest()[:40]
+            digest = hashlib.sha256(text.encode()).hexdigest()[:40]
             path = folder / f"{self.fun.__name__}-{digest}.bin"
             if path.exists():
                 loaded = _load(path)

@@ -100,31 +100,54 @@ def make_samples(spec: MotorSpec, theta, speed, p_a, p_b, p_case, viscosity, acc
     """Assemble :class:`Samples`, computing the parameter-free S(θ) once.
 
     ripple : "exact" (per-piston sum, Eq. 7/36) or "approx" (Eq. 8-10/38-40).
+    Every field is broadcast to the shape of θ; defaults: acceleration 0,
+    direction sign(speed), temperature 40 °C, time 0.  Concrete inputs run as
+    one compiled program (kept on disk, :mod:`motorid._aot`); traced inputs (a
+    simulator inside ``jax.jit``) are assembled in the trace.
     """
-    theta = jnp.asarray(theta, dtype=jnp.float64)
-    speed = jnp.asarray(speed, dtype=jnp.float64)
-    like = jnp.zeros_like(theta)
     if ripple == "exact":
-        s = port_a_sum(theta, spec.pistons)
+        coefficients = None
     elif ripple == "approx":
-        c1, c2, _ = ripple_coefficients(spec.pistons)
-        s = port_a_sum_approx(theta, spec.pistons, c1, c2)
+        with jax.ensure_compile_time_eval():  # constants, also when called inside jax.jit
+            c1, c2, _ = ripple_coefficients(spec.pistons)
+        coefficients = (float(c1), float(c2))
     else:
         raise ValueError(f"ripple must be 'exact' or 'approx', got {ripple!r}")
-    as_arr = lambda x, default: like + (default if x is None else jnp.asarray(x, dtype=jnp.float64))  # noqa: E731
+    fields = (theta, speed, acceleration, p_a, p_b, p_case, viscosity, direction, temperature, time)
+    defaults = (None, None, 0.0, 0.0, 0.0, 0.0, 0.0, None, 40.0, 0.0)
+    fields = tuple(d if f is None else f for f, d in zip(fields, defaults))
+    if any(isinstance(f, jax.core.Tracer) for f in fields):
+        return _assemble_samples(spec.pistons, coefficients, *fields)
+    arrays = tuple(None if f is None else np.asarray(f, dtype=np.float64) for f in fields)
+    # NumPy views of the result: later arithmetic on concrete samples stays in NumPy
+    return Samples(*[np.asarray(f) for f in _assemble_samples_jit(spec.pistons, coefficients, *arrays)])
+
+
+def _assemble_samples(pistons: int, coefficients, theta, speed, acceleration, p_a, p_b, p_case, viscosity,
+                      direction, temperature, time) -> Samples:
+    theta = jnp.asarray(theta, dtype=jnp.float64)
+    like = jnp.zeros_like(theta)
+    speed = like + jnp.asarray(speed, dtype=jnp.float64)
+    if coefficients is None:
+        s = port_a_sum(theta, pistons)
+    else:
+        s = port_a_sum_approx(theta, pistons, *coefficients)
+    as_arr = lambda x: like + jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
     return Samples(
-        theta=theta,
-        speed=like + speed,
-        acceleration=as_arr(acceleration, 0.0),
-        p_a=as_arr(p_a, 0.0),
-        p_b=as_arr(p_b, 0.0),
-        p_case=as_arr(p_case, 0.0),
-        viscosity=as_arr(viscosity, 0.0),
-        direction=like + (jnp.sign(speed) if direction is None else jnp.asarray(direction, dtype=jnp.float64)),
-        port_sum=s,
-        temperature=as_arr(temperature, 40.0),
-        time=as_arr(time, 0.0),
+        theta=theta, speed=speed, acceleration=as_arr(acceleration), p_a=as_arr(p_a), p_b=as_arr(p_b),
+        p_case=as_arr(p_case), viscosity=as_arr(viscosity),
+        direction=jnp.sign(speed) if direction is None else as_arr(direction),
+        port_sum=like + s, temperature=as_arr(temperature), time=as_arr(time),
     )
+
+
+def _late_cached_jit():
+    from motorid._aot import cached_jit  # motorid._aot imports this module's package
+
+    return cached_jit(_assemble_samples)
+
+
+_assemble_samples_jit = _late_cached_jit()
 
 
 class Channels(NamedTuple):
@@ -226,15 +249,17 @@ def as_float(params: dict) -> dict:
     return {k: float(np.asarray(v)) for k, v in params.items()}
 
 
-def constrain(y, positive, scales):
-    """Unconstrained vector → parameter values: p = s·exp(y) where positive, else s·y."""
-    return jnp.where(positive, jnp.exp(y), y) * scales
+def constrain(y, positive, scales, xp=jnp):
+    """Unconstrained vector → parameter values: p = s·exp(y) where positive, else s·y.
+
+    xp : the array module (``numpy`` outside traced code saves JAX dispatches)."""
+    return xp.where(positive, xp.exp(y), y) * scales
 
 
-def unconstrain(values, positive, scales):
+def unconstrain(values, positive, scales, xp=jnp):
     """Parameter values → unconstrained vector: y = log(p/s) where positive, else p/s."""
     v = values / scales
-    return jnp.where(positive, jnp.log(jnp.where(positive, v, 1.0)), v)
+    return xp.where(positive, xp.log(xp.where(positive, v, 1.0)), v)
 
 
 class ParameterTransform:

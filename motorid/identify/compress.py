@@ -104,7 +104,7 @@ class Expansion:
         order = tuple(c for c in ls.CHANNELS if c in ctx.observed)
         names = tuple(free)
         p = len(names)
-        p0 = jnp.asarray([values[k] for k in names], dtype=jnp.float64)
+        p0 = np.array([values[k] for k in names], dtype=np.float64)
         # which parameters each channel depends on, and the products: on a few cells
         # of every run (a dependency missed here fails the exactness check below)
         n_cells = problem.n_real("torque") if problem.has_running else 0

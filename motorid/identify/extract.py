@@ -174,7 +174,7 @@ def _circular_mean(theta: np.ndarray) -> float:
 # ----------------------------------------------------------------- steady state
 
 
-def steady_state_mask(speed, dp, psum, settings: ExtractSettings = ExtractSettings()):
+def steady_state_mask(speed, dp, psum, settings: ExtractSettings = ExtractSettings(), smoothed=None):
     """Steady-state samples of one running run → (steady, start_transient) boolean masks.
 
     speed [rad/s], dp = P_A − P_B [Pa], psum = P_A + P_B [Pa], in time order (NaN
@@ -184,17 +184,20 @@ def steady_state_mask(speed, dp, psum, settings: ExtractSettings = ExtractSettin
     (so shaft-angle ripple at low speed stays inside), at least ``rel_tol`` of the
     level and the floors.  The start transient ends where every channel has
     stayed in its band for a sustained stretch; later samples out of band are
-    unsteady.
+    unsteady.  ``smoothed``: a dict to receive each channel's moving median (the
+    caller reuses the speed's).
     """
     speed, dp, psum = (np.asarray(a, dtype=float) for a in (speed, dp, psum))
     n = speed.size
     window = max(1, _odd(min(int(np.clip(n // 100, 5, 21)), n)))
     in_band = np.ones(n, bool)
-    for x, floor in ((speed, settings.speed_floor), (dp, settings.pressure_floor),
-                     (psum, settings.pressure_floor)):
+    for name, x, floor in (("speed", speed, settings.speed_floor), ("dp", dp, settings.pressure_floor),
+                           ("psum", psum, settings.pressure_floor)):
         if not np.isfinite(x).any():
             continue
         smooth = pd.Series(x).rolling(window, center=True, min_periods=1).median().to_numpy()
+        if smoothed is not None:
+            smoothed[name] = smooth
         tail = smooth[n // 2:]
         if not np.isfinite(tail).any():
             continue
@@ -467,9 +470,9 @@ def _running_run(key, cols, settings, excluded, notes):
     direction = float(np.sign(median_speed))
     p_a, p_b = cols["p_a_Pa"], cols["p_b_Pa"]
     idx = np.flatnonzero(valid)
-    steady, transient = steady_state_mask(speed[idx], (p_a - p_b)[idx], (p_a + p_b)[idx], settings)
-    window = max(1, _odd(min(int(np.clip(idx.size // 100, 5, 21)), idx.size)))
-    smooth = pd.Series(speed[idx]).rolling(window, center=True, min_periods=1).median().to_numpy()
+    smoothed: dict = {}
+    steady, transient = steady_state_mask(speed[idx], (p_a - p_b)[idx], (p_a + p_b)[idx], settings, smoothed)
+    smooth = smoothed["speed"]  # the speed's moving median (valid samples have a finite speed)
     stopped = direction * smooth < min(settings.rest_speed, 0.5 * abs(median_speed))
     excluded[START_TRANSIENT] = excluded.get(START_TRANSIENT, 0) + int(transient.sum())
     excluded[NO_STEADY_SPEED] = excluded.get(NO_STEADY_SPEED, 0) + int((stopped & ~transient).sum())

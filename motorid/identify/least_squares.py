@@ -17,13 +17,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import NamedTuple, Sequence
 
-import equinox as eqx
-import lineax as lx
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from motorid import model
 from motorid._aot import cached_jit
@@ -335,10 +332,10 @@ def _residual_unconstrained(y, ctx: _Ctx):
     return _residual_natural(_from_unconstrained(y, ctx), ctx)
 
 
-_residual_jit = eqx.filter_jit(_residual_natural)
+_residual_jit = cached_jit(_residual_natural)
 
 
-@eqx.filter_jit
+@cached_jit
 def _normal_equations(values: dict, ctx: _Ctx):
     """JᵀJ, Jᵀr and rᵀr of the weighted residual over the free parameters (in
     the order of ``ctx.free``): the sufficient statistics of a Gauss-Newton step,
@@ -350,13 +347,82 @@ def _normal_equations(values: dict, ctx: _Ctx):
 _predictions_jit = cached_jit(_predictions)
 
 
-@eqx.filter_jit
+_SOLVER = []
+
+
+def _optimistix():
+    """(optimistix, the damped normal-equation solver), imported when a solver is first
+    traced: a run whose compiled solvers come from disk (motorid._aot) never pays
+    the import of optimistix, lineax and equinox."""
+    import optimistix
+
+    if not _SOLVER:
+        _SOLVER.append(_dense_cholesky_solver())
+    return optimistix, _SOLVER[0]
+
+
+def _cholesky(A):
+    """Lower Cholesky factor of a small SPD matrix in plain XLA operations [same units]."""
+    n = A.shape[0]
+    idx = jnp.arange(n)
+
+    def column(j, L):
+        s = A[:, j] - L @ L[j, :]  # columns ≥ j of L are still zero
+        d = jnp.sqrt(jnp.maximum(s[j], jnp.finfo(A.dtype).tiny))
+        return L.at[:, j].set(jnp.where(idx >= j, s / d, 0.0))
+
+    return jax.lax.fori_loop(0, n, column, jnp.zeros_like(A))
+
+
+def _cholesky_solve(L, b):
+    """x with L Lᵀ x = b: forward then backward substitution."""
+    n = b.shape[0]
+    y = jax.lax.fori_loop(0, n, lambda i, y: y.at[i].set((b[i] - L[i, :] @ y) / L[i, i]), jnp.zeros_like(b))
+
+    def back(k, x):
+        i = n - 1 - k
+        return x.at[i].set((y[i] - L[:, i] @ x) / L[i, i])
+
+    return jax.lax.fori_loop(0, n, back, jnp.zeros_like(b))
+
+
+def _dense_cholesky_solver():
+    """lineax ``Normal(Cholesky)`` for the damped system of Levenberg-Marquardt, whose
+    matrix is parameters × parameters: factorized in plain XLA operations, not by
+    LAPACK, so that a compiled solver loads without importing scipy.linalg."""
+    import jax.flatten_util as jfu
+    import lineax as lx
+
+    class DenseCholesky(lx.AbstractLinearSolver):
+        def init(self, operator, options):
+            return _cholesky(operator.as_matrix())
+
+        def compute(self, state, vector, options):
+            flat, unflatten = jfu.ravel_pytree(vector)
+            return unflatten(_cholesky_solve(state, flat)), lx.RESULTS.successful, {}
+
+        def transpose(self, state, options):
+            return state, options  # symmetric
+
+        def conj(self, state, options):
+            return state, options  # real
+
+        def assume_full_rank(self):
+            return True
+
+    return lx.Normal(DenseCholesky())
+
+
+@cached_jit
 def _levenberg_marquardt(y0, ctx: _Ctx, rtol, atol, max_steps):
+    """Optimistix LM on the full residual → (y, steps, converged)."""
     # normal equations with Cholesky: the damped system is parameters × parameters,
     # eight times faster here than QR of the tall Jacobian; float64 and the
     # log/scale transform keep its condition number harmless
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
-    return optx.least_squares(_residual_unconstrained, solver, y0, args=ctx, max_steps=max_steps, throw=False)
+    optx, linear_solver = _optimistix()
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
+    sol = optx.least_squares(_residual_unconstrained, solver, y0, args=ctx, max_steps=max_steps, throw=False)
+    return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
 
 def bucket(n: int, minimum: int = 64) -> int:
@@ -372,8 +438,7 @@ def pad_samples(s: Samples, size: int) -> Samples:
     """Samples padded to ``size`` with harmless values (weights there are zero)."""
     n = int(np.asarray(s.theta).size)
     return Samples(*[
-        jnp.concatenate([jnp.asarray(f, dtype=jnp.float64),
-                         jnp.full(size - n, _PAD.get(name, 0.0), dtype=jnp.float64)])
+        np.concatenate([np.asarray(f, dtype=np.float64), np.full(size - n, _PAD.get(name, 0.0))])
         for name, f in zip(Samples._fields, s)
     ])
 
@@ -447,13 +512,13 @@ class _Problem:
             y = np.where(ok, self.measured[c], 0.0)
             cnt = np.bincount(self.cell_of, weights=ok.astype(float), minlength=self.n_cells)
             tot = np.bincount(self.cell_of, weights=y, minlength=self.n_cells)
-            obs[c] = jnp.asarray(pad(np.where(cnt > 0, tot / np.maximum(cnt, 1), 0.0), self.cell_size))
-            w[c] = jnp.asarray(pad(np.sqrt(cnt) / sigma_runs[c][self.cell_run], self.cell_size))
+            obs[c] = pad(np.where(cnt > 0, tot / np.maximum(cnt, 1), 0.0), self.cell_size)
+            w[c] = pad(np.sqrt(cnt) / sigma_runs[c][self.cell_run], self.cell_size)
         if self.has_events:
             ok = inliers["breakaway"]
             size = int(np.asarray(self.events_padded.theta).size)
-            obs["breakaway"] = jnp.asarray(pad(np.where(ok, self.held_torque, 0.0), size))
-            w["breakaway"] = jnp.asarray(pad(np.where(ok, 1.0 / sigma_breakaway, 0.0), size))
+            obs["breakaway"] = pad(np.where(ok, self.held_torque, 0.0), size)
+            w["breakaway"] = pad(np.where(ok, 1.0 / sigma_breakaway, 0.0), size)
         self.cells = (obs, w)
         self.cells_version = getattr(self, "cells_version", 0) + 1
 
@@ -465,8 +530,8 @@ class _Problem:
         obs, w = self.cells
         return _Ctx(
             spec=self.spec, mechanisms=self.mechanisms, free=free, positive=positive,
-            scales=jnp.asarray(scales, dtype=jnp.float64),
-            held={k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()},
+            scales=np.asarray(scales, dtype=np.float64),
+            held={k: np.asarray(v, dtype=np.float64) for k, v in self.held.items()},
             running=self.cell_samples if self.has_running else None,
             events=self.events_padded if self.has_events else None,
             observed=obs, weights=w,
@@ -476,7 +541,7 @@ class _Problem:
         """Per-sample predictions of every channel (not the cells)."""
         ctx = _Ctx(
             spec=self.spec, mechanisms=self.mechanisms, free=tuple(self.free), positive=(),
-            scales=jnp.zeros(0), held={k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()},
+            scales=np.zeros(0), held={k: np.asarray(v, dtype=np.float64) for k, v in self.held.items()},
             running=self.running_padded if self.has_running else None,
             events=self.events_padded if self.has_events else None, observed={}, weights={},
         )
@@ -640,7 +705,8 @@ def _scales(values: dict, free: list, mechanisms) -> np.ndarray:
 
 
 def _as_jnp(values: dict) -> dict:
-    return {k: jnp.asarray(v, dtype=jnp.float64) for k, v in values.items()}
+    """Parameter values as float64 arrays (NumPy: a jitted call takes them without a JAX dispatch)."""
+    return {k: np.asarray(v, dtype=np.float64) for k, v in values.items()}
 
 
 def _covariance(JtJ: np.ndarray) -> np.ndarray:
@@ -697,9 +763,9 @@ class _FullBackend:
         scales = _scales(values, free, mechs)
         ctx = self.problem.ctx(scales)
         y0 = _to_unconstrained(_as_jnp(values), ctx)
-        sol = _levenberg_marquardt(y0, ctx, opt.rtol, opt.atol, opt.max_steps)
-        new = {k: float(v) for k, v in _from_unconstrained(sol.value, ctx).items()}
-        return new, int(sol.stats.get("num_steps", 0)), bool(sol.result == optx.RESULTS.successful)
+        y, steps, ok = _levenberg_marquardt(y0, ctx, opt.rtol, opt.atol, opt.max_steps)
+        new = {k: float(v) for k, v in _from_unconstrained(y, ctx).items()}
+        return new, int(steps), bool(ok)
 
 
 class _CompressedCtx(NamedTuple):
@@ -721,7 +787,8 @@ def _compressed_residual(y, c: _CompressedCtx):
 @cached_jit
 def _levenberg_marquardt_compressed(y0, c: _CompressedCtx, rtol, atol, max_steps):
     """Optimistix LM on the compressed residual → (y, steps, converged) (arrays only: kept on disk)."""
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    optx, linear_solver = _optimistix()
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
     sol = optx.least_squares(_compressed_residual, solver, y0, args=c, max_steps=max_steps, throw=False)
     return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
@@ -763,13 +830,13 @@ class _CompressedBackend:
         mechs = self.problem.mechanisms
         scales = _scales(values, free, mechs)
         positive = tuple(bool(model.parameter_info(k, mechs).positive) for k in free)
-        c = _CompressedCtx(jnp.asarray(self.R0), jnp.asarray(self.R1), jnp.asarray(self.exp.p0),
-                           jnp.asarray(self.exp.a), jnp.asarray(self.exp.b), jnp.asarray(self.exp.half),
-                           positive, jnp.asarray(scales))
+        c = _CompressedCtx(np.asarray(self.R0), np.asarray(self.R1), np.asarray(self.exp.p0),
+                           np.asarray(self.exp.a), np.asarray(self.exp.b), np.asarray(self.exp.half),
+                           positive, np.asarray(scales, dtype=np.float64))
         pos = np.array(positive)
-        y0 = model.unconstrain(jnp.asarray([values[k] for k in free]), pos, c.scales)
+        y0 = model.unconstrain(np.array([values[k] for k in free], dtype=float), pos, c.scales, xp=np)
         y, steps, ok = _levenberg_marquardt_compressed(y0, c, opt.rtol, opt.atol, opt.max_steps)
-        p = np.asarray(model.constrain(y, pos, c.scales))
+        p = model.constrain(np.asarray(y), pos, c.scales, xp=np)
         new = {k: float(p[i]) for i, k in enumerate(free)}
         return new, int(steps), bool(ok)
 
