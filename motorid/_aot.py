@@ -21,7 +21,8 @@ a program with a host callback, a cache folder that cannot be written, a file
 that does not load — falls back to compiling in memory, with the same result.
 Files live in ``$MOTORID_CACHE_DIR/aot/<source version>/`` beside the XLA
 cache (30-200 kB each); the folders of all but the last few source versions are
-removed as new ones appear; delete the folder to clear them.
+removed as new ones appear; delete the folder to clear them.  The files are
+pickles and executable code: the folder must be the user's own, like any cache.
 """
 
 from __future__ import annotations
