@@ -15,6 +15,58 @@ from motorid.identify.least_squares import CHANNEL_UNITS, FitResult
 
 RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
+BREAKAWAY_ONLY = ("KFS", "Ks")  # parameters only the breakaway events determine
+
+
+def interval_dof(ls: FitResult) -> dict:
+    """Effective degrees of freedom of each fitted parameter's standard error.
+
+    A standard error is as uncertain as the noise levels it rests on.  The
+    running channels' levels come from dozens to hundreds of residuals per run
+    (treated as exact here); the breakaway level σ_brk from one residual per
+    event, n events less the breakaway-only parameters (K_FS, K_s) — the same
+    count the fit divides by.  With V = (JᵀWJ)⁻¹ and A_brk the breakaway
+    events' share of JᵀWJ, the share of parameter i's variance that scales with
+    σ_brk² is f_i = (V A_brk V)_ii / V_ii, and Welch–Satterthwaite gives
+    ν_i = ν_brk / f_i²: ≈ n − 2 for K_FS and K_s, effectively infinite for the
+    parameters the running data determine.  Returns name → ν (inf where no
+    breakaway noise enters).
+    """
+    free = list(ls.free)
+    out = {k: float("inf") for k in free}
+    problem = getattr(ls, "problem", None)
+    if not free or problem is None or not getattr(problem, "has_events", False) or problem.cells is None:
+        return out
+    n_events = int(np.sum(ls.inliers.get("breakaway", np.zeros(0, bool))))
+    nu_brk = n_events - sum(1 for k in BREAKAWAY_ONLY if k in free)
+    if nu_brk < 1:
+        return out
+    import jax.numpy as jnp
+
+    from motorid.identify.least_squares import _normal_equations
+
+    ctx = problem.ctx()
+    brk = ctx._replace(running=None, observed={"breakaway": ctx.observed["breakaway"]},
+                       weights={"breakaway": ctx.weights["breakaway"]})
+    values = {k: jnp.asarray(ls.values[k], dtype=jnp.float64) for k in free}
+    A_brk = np.asarray(_normal_equations(values, brk)[0])
+    V = np.asarray(ls.covariance) / max(ls.reduced_chi2, 1.0)  # the fit widens V by χ²/dof > 1
+    d = np.diag(V)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.clip(np.diag(V @ A_brk @ V) / d, 0.0, 1.0)
+    for i, k in enumerate(free):
+        if np.isfinite(f[i]) and f[i] > 1e-6:
+            out[k] = float(nu_brk / f[i] ** 2)
+    return out
+
+
+def interval_factor(dof: float, level: float = 0.95) -> float:
+    """Half-width of a central ``level`` interval in standard errors: Student-t
+    with ``dof`` degrees of freedom (the normal quantile where dof is infinite)."""
+    from scipy import stats
+
+    q = 0.5 * (1.0 + level)
+    return float(stats.norm.ppf(q) if not np.isfinite(dof) or dof > 1e6 else stats.t.ppf(q, dof))
 
 
 def versions() -> dict:
@@ -53,12 +105,17 @@ def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict 
                     seconds: float | None = None, priors: dict | None = None) -> dict:
     """The result.json document of a least-squares (and optional Bayesian) fit."""
     params = {}
+    dof = interval_dof(ls)
     for k in ls.names:
         info = model.parameter_info(k, ls.mechanisms)
         entry = {"value": ls.values[k], "unit": info.unit, "std": ls.std[k], "ci95": None,
                  "identifiable": bool(ls.identifiable[k]), "meaning": info.meaning}
         if ls.identifiable[k] and ls.values[k] is not None and ls.std[k] is not None:
-            entry["ci95"] = [ls.values[k] - 1.959964 * ls.std[k], ls.values[k] + 1.959964 * ls.std[k]]
+            # Student-t where the standard error rests on the few breakaway events (interval_dof)
+            half = interval_factor(dof.get(k, float("inf"))) * ls.std[k]
+            entry["ci95"] = [ls.values[k] - half, ls.values[k] + half]
+            if np.isfinite(dof.get(k, float("inf"))):
+                entry["dof"] = dof[k]
         else:
             entry["reason"] = ls.reasons.get(k, "not determined by these logs")
         if bayes is not None and k in bayes.median:
