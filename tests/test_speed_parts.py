@@ -142,3 +142,13 @@ def test_even_sampling_derivative_equals_the_local_fit(jitter):
         slow[i] = np.polyfit(t[sl] - t[i], w[sl], 2)[1]
     tol = 1e-9 if jitter == 0 else 0.02
     np.testing.assert_allclose(fast, slow, rtol=0, atol=tol * np.max(np.abs(slow)))
+
+
+@pytest.mark.parametrize("dof", [5.0, 7.5, 12.0, 28.0, 300.0])
+@pytest.mark.parametrize("level", [0.6827, 0.95])
+def test_t_quantile_without_scipy_stats_matches_scipy(dof, level):
+    from scipy import stats
+
+    from motorid.identify.results import interval_factor
+
+    assert interval_factor(dof, level) == pytest.approx(stats.t.ppf(0.5 + level / 2, dof), rel=1.2e-4)
