@@ -118,12 +118,12 @@ def noise_model_sigma(spec, truth_params, prots, camp, data, unresolved=True):
 
 
 def unresolved_acceleration(camp, data):
-    """Mean square, per run, of the true acceleration the extraction's 9-point
-    derivative cannot follow even on noise-free speed (the dynamometer's
-    once-per-revolution speed ripple is aliased at 2500 rpm and 50 Hz) [rad²/s⁴],
-    per running sample.  Its phase is random from run to run, so for the fit it
-    is an input error like noise."""
-    from motorid.identify.extract import smoothed_acceleration
+    """Mean square, per run, of the true acceleration that the extraction's own
+    estimate (``extract.running_acceleration``: the shaft-locked speed ripple
+    resolved in θ, the rest by a 9-point derivative) misses even on noise-free
+    speed [rad²/s⁴], per running sample.  Its phase is random from run to run,
+    so for the fit it is an input error like noise."""
+    from motorid.identify.extract import running_acceleration
 
     tf = camp.true_frame
     out = np.zeros(data.n_running)
@@ -131,9 +131,12 @@ def unresolved_acceleration(camp, data):
     for r in np.unique(data.run_of_sample):
         sel = np.flatnonzero(data.run_of_sample == r)
         rows = np.flatnonzero(keys == data.runs["run"].iloc[r])
-        est = smoothed_acceleration(tf["time_s"].to_numpy()[rows], tf["speed_rad_s"].to_numpy()[rows])
-        err = tf["acceleration_rad_s2"].to_numpy()[rows] - est
         pos = np.searchsorted(rows, data.frame_index[sel])
+        steady = np.zeros(rows.size, bool)
+        steady[pos] = True
+        est = running_acceleration(tf["time_s"].to_numpy()[rows], tf["speed_rad_s"].to_numpy()[rows],
+                                   np.mod(tf["theta_rad"].to_numpy()[rows], 2 * np.pi), steady)
+        err = tf["acceleration_rad_s2"].to_numpy()[rows] - est
         out[sel] = np.mean(err[pos] ** 2)
     return out
 
@@ -642,18 +645,16 @@ def run(quick: bool = False) -> str:
         f"- Efficiency: the largest ratio is {eff['ratio'][worst]:.3f} ({eff['names'][worst]}), {verdict}"
         + (f"  Ratios wholly below 1 ({', '.join(below)}) do not beat a true bound: they show that the noise "
            "model used for the bound is conservative for them." if below else ""),
-        "- K_v: its bound (column 6) counts the aliased once-per-revolution acceleration error of the fast runs "
-        "as white input noise, and so does the fit's per-run torque σ (in the first replication 0.26-0.32 N·m "
-        "in the 2500 rpm runs against 0.08-0.16 N·m once each run's first shaft order is taken out of its "
-        "residual).  That error is locked to the shaft angle: within a run it is a sinusoid in θ that sums to "
-        "almost nothing over the run's revolutions, so it barely moves K_v — the estimator's spread sits well "
-        "below the bound that counts it, and the fit's standard error is too wide (over-coverage, and the hump "
-        "in the posterior's ranks).  It is not a floor either: with the acceleration resolved in shaft angle "
-        + (f"(diagnosis table) K_v's spread goes {kv_d['base_emp']:.2f} → {kv_d['emp']:.2f} and its standard "
-           f"error {kv_d['base_ls']:.2f} → {kv_d['ls']:.2f} (empirical/LS {kv_d['base_emp'] / kv_d['base_ls']:.2f} "
-           f"→ {kv_d['emp'] / kv_d['ls']:.2f}): the fast runs get their weight back.  " if kv_d else "")
-        + "The fix belongs in the extraction (`extract`), and the bound should then drop the unresolved term "
-        "(column 7).",
+        "- K_v: the fast runs' speed carries the dynamometer's once-per-revolution ripple, aliased at 2500 rpm "
+        "and 50 Hz; a plain derivative of the sampled speed turned it into a false J·α of 0.25 N·m rms in their "
+        "torque (2-3 times the torque sensor's noise), which inflated the fit's per-run σ and with it K_v's "
+        "standard error (over-coverage, a hump in the posterior's ranks: the previous run of this study).  The "
+        "extraction now resolves a shaft-locked speed ripple in θ (`extract.running_acceleration`: shaft orders "
+        "1 and 2 fitted per steady run and differentiated through θ, the rest by the 9-point derivative); the "
+        "bound's column 6 adds what that estimate still misses on noise-free speed, column 7 leaves it out"
+        + (f"; on top of it the order-1 prototype of the diagnosis table moves K_v's spread "
+           f"{kv_d['base_emp']:.2f} → {kv_d['emp']:.2f} and its standard error {kv_d['base_ls']:.2f} → "
+           f"{kv_d['ls']:.2f}" if kv_d else "") + ".",
         f"- K_L0 and the K_L harmonics: K_L0's bias ({bias_of.get('KL0', float('nan')):+.2f} bound-widths) is "
         "errors-in-variables attenuation: the leakage flows go as 1/μ and the fit conditions on the viscometer's "
         "noisy reading (0.3 % relative), so E[K̂_L0]/K_L0 ≈ 1 − 2σ_rel² ≈ 1 − 1.8·10⁻⁵, about half a "

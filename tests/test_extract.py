@@ -232,3 +232,29 @@ def test_bad_spec_or_frame_is_an_input_error():
         ex.extract(frame, MotorSpec("bad", pistons=9, displacement=-1.0))
     with pytest.raises(InputError, match="speed_rad_s"):
         ex.extract(frame.drop(columns="speed_rad_s"), SPEC)
+
+
+def test_shaft_locked_speed_ripple_gives_its_true_acceleration_even_when_aliased():
+    """2500 rpm sampled at 50 Hz: a once-per-revolution speed wobble aliases; its
+    acceleration comes from θ, the plain derivative of sampled speed is wrong."""
+    from motorid.identify.extract import running_acceleration, smoothed_acceleration
+
+    rng = np.random.default_rng(11)
+    w0, amp, rate = 2500 * 2 * np.pi / 60, 0.4, 50.0
+    t = np.arange(400) / rate
+    theta = w0 * t + 0.3  # the wobble hardly moves θ: first order is enough for the truth
+    speed = w0 + amp * np.cos(theta) + 0.002 * rng.standard_normal(t.size)
+    true_acc = -amp * np.sin(theta) * w0
+    steady = np.ones(t.size, bool)
+    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), steady)
+    plain = smoothed_acceleration(t, speed)
+    inner = slice(5, -5)
+    assert np.sqrt(np.mean((got - true_acc)[inner] ** 2)) < 0.02 * np.sqrt(np.mean(true_acc**2))
+    assert np.sqrt(np.mean((plain - true_acc)[inner] ** 2)) > 0.5 * np.sqrt(np.mean(true_acc**2))
+    # no ripple: the same as the plain derivative up to the fitted noise
+    flat = w0 + 0.002 * rng.standard_normal(t.size)
+    a = running_acceleration(t, flat, np.mod(theta, 2 * np.pi), steady)
+    assert np.max(np.abs(a - smoothed_acceleration(t, flat))) < 0.05 * w0 * 0.002 * 10
+    # less than two revolutions: the plain derivative
+    assert np.array_equal(running_acceleration(t[:40], speed[:40], np.full(40, 0.1), steady[:40]),
+                          smoothed_acceleration(t[:40], speed[:40]))

@@ -61,6 +61,8 @@ class ExtractSettings:
     speed_floor : smallest half-width of the speed band [rad/s]
     pressure_floor : smallest half-width of the pressure bands [Pa]
     accel_window : window of the local quadratic fit giving the acceleration [samples]
+    shaft_orders : shaft orders of a speed ripple locked to the shaft angle, whose
+        acceleration is taken from θ, not from differences of sampled speed [-]
     stuck_turn : most the shaft angle may change before a breakaway, creep included [rad]
     """
 
@@ -72,6 +74,7 @@ class ExtractSettings:
     speed_floor: float = 1e-3
     pressure_floor: float = 5e3
     accel_window: int = 9
+    shaft_orders: tuple = (1, 2)
     stuck_turn: float = 0.2
 
 
@@ -256,6 +259,56 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
         return slope / scale
     out[edge] = slope
     return out / scale
+
+
+def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1, 2)) -> np.ndarray:
+    """dω/dt of a steady run with any speed ripple locked to the shaft angle resolved [rad/s²].
+
+    A dynamometer's coupling or a shaft's eccentricity makes the speed wobble at
+    shaft orders 1, 2, …; at high speed the samples alias that wobble, and a
+    derivative of sampled speed (:func:`smoothed_acceleration`) turns it into a
+    false slow acceleration, J·α of which lands in the torque.  Over the
+    ``steady`` samples, speed = slow trend + Σₖ aₖ cos kθ + bₖ sin kθ is fitted
+    by least squares (the trend a Chebyshev polynomial in time of degree about
+    half the revolutions turned, 2 to 10: smooth over a revolution, so the two
+    parts do not mix); the derivative of sampled speed is taken of the rest, and
+    the ripple's own derivative, ω Σₖ k(bₖ cos kθ − aₖ sin kθ), is added back
+    exactly.  The plain derivative is returned where the run turns less than
+    two revolutions, the fit is ill-conditioned, or the ripple is not
+    significant (F statistic below 30).
+    """
+    t = np.asarray(time, dtype=float)
+    w = np.asarray(speed, dtype=float)
+    th = np.asarray(theta, dtype=float)
+    plain = smoothed_acceleration(t, w, window)
+    sel = np.flatnonzero(np.asarray(steady, dtype=bool) & np.isfinite(w) & np.isfinite(th) & np.isfinite(t))
+    orders = tuple(int(k) for k in orders)
+    if not orders or sel.size < 50:
+        return plain
+    revolutions = abs(np.ptp(np.unwrap(th[sel]))) / (2 * np.pi)
+    if revolutions < 2.0:
+        return plain
+    span = np.ptp(t[sel])
+    u = 2.0 * (t[sel] - t[sel].min()) / max(span, 1e-300) - 1.0
+    trend = np.polynomial.chebyshev.chebvander(u, int(np.clip(revolutions / 2, 2, 10)))
+    harmonics = np.column_stack([f(k * th[sel]) for k in orders for f in (np.cos, np.sin)])
+    X = np.column_stack([trend, harmonics])
+    dof = sel.size - X.shape[1]
+    if dof < 20 or np.linalg.cond(X) > 1e8:
+        return plain
+    coef = np.linalg.lstsq(X, w[sel], rcond=None)[0]
+    rss = float(np.sum((w[sel] - X @ coef) ** 2))
+    rss_trend = float(np.sum((w[sel] - trend @ np.linalg.lstsq(trend, w[sel], rcond=None)[0]) ** 2))
+    q = harmonics.shape[1]
+    if rss <= 0 or (rss_trend - rss) / q / (rss / dof) < 30.0:
+        return plain
+    a, b = coef[trend.shape[1]::2], coef[trend.shape[1] + 1::2]
+    k = np.asarray(orders, dtype=float)
+    ok = np.isfinite(th)
+    phase = np.outer(np.where(ok, th, 0.0), k)
+    ripple = np.where(ok, np.cos(phase) @ a + np.sin(phase) @ b, np.nan)
+    ripple_rate = np.where(ok, np.cos(phase) @ (k * b) - np.sin(phase) @ (k * a), 0.0)
+    return smoothed_acceleration(t, w - ripple, window) + w * ripple_rate
 
 
 # ----------------------------------------------------------------- breakaway
@@ -589,7 +642,10 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
             row.update(direction=direction, excluded=why)
             if chosen is not None:
                 used = chosen
-                acc = smoothed_acceleration(cols["time_s"], cols["speed_rad_s"], settings.accel_window)
+                steady = np.zeros(pos.size, bool)
+                steady[chosen] = True
+                acc = running_acceleration(cols["time_s"], cols["speed_rad_s"], cols["theta_rad"], steady,
+                                           settings.accel_window, settings.shaft_orders)
                 picks.append(pos[chosen])
                 accel.append(acc[chosen])
                 run_of_sample.append(np.full(chosen.size, r))
