@@ -54,3 +54,8 @@ def test_posterior_integrates_the_breakaway_noise_out(fitted):
         assert 0.9 * ls.std[k] < post.std[k] < 1.35 * ls.std[k], (k, post.std[k], ls.std[k])
     for k in ("Kv", "KL0"):
         assert post.std[k] == pytest.approx(fixed.std[k], rel=0.15)
+    from motorid.identify.results import result_document
+
+    doc = result_document(ls, spec, bayes=post)
+    assert doc["mcmc"]["breakaway_noise"].startswith("integrated out")
+    assert result_document(ls, spec, bayes=fixed)["mcmc"]["breakaway_noise"].startswith("held")

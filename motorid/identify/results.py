@@ -164,6 +164,8 @@ def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict 
             "likelihood": ("exact second-order expansion of the model (sufficient statistics), checked on "
                            f"posterior draws: largest |Δ log p| {bayes.expansion_gap:.2g}"
                            if bayes.expansion_gap is not None else "full model at every step"),
+            "breakaway_noise": ("integrated out under p(σ_brk) ∝ 1/σ_brk" if bayes.breakaway_noise == "marginalized"
+                                else "held at the least-squares value"),
         }
     return _clean(doc)
 
