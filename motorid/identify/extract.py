@@ -273,9 +273,10 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
     half the revolutions turned, 2 to 10: smooth over a revolution, so the two
     parts do not mix); the derivative of sampled speed is taken of the rest, and
     the ripple's own derivative, ω Σₖ k(bₖ cos kθ − aₖ sin kθ), is added back
-    exactly.  The plain derivative is returned where the run turns less than
-    two revolutions, the fit is ill-conditioned, or the ripple is not
-    significant (F statistic below 30).
+    exactly.  Only the orders that are significant are kept (each must raise the
+    fit's F statistic by 30 or more; an order fitted to noise would add that
+    noise back k·ω times amplified); the plain derivative is returned where none
+    is, the run turns less than two revolutions, or the fit is ill-conditioned.
     """
     t = np.asarray(time, dtype=float)
     w = np.asarray(speed, dtype=float)
@@ -291,19 +292,27 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
     span = np.ptp(t[sel])
     u = 2.0 * (t[sel] - t[sel].min()) / max(span, 1e-300) - 1.0
     trend = np.polynomial.chebyshev.chebvander(u, int(np.clip(revolutions / 2, 2, 10)))
-    harmonics = np.column_stack([f(k * th[sel]) for k in orders for f in (np.cos, np.sin)])
-    X = np.column_stack([trend, harmonics])
-    dof = sel.size - X.shape[1]
-    if dof < 20 or np.linalg.cond(X) > 1e8:
-        return plain
-    coef = np.linalg.lstsq(X, w[sel], rcond=None)[0]
-    rss = float(np.sum((w[sel] - X @ coef) ** 2))
-    rss_trend = float(np.sum((w[sel] - trend @ np.linalg.lstsq(trend, w[sel], rcond=None)[0]) ** 2))
-    q = harmonics.shape[1]
-    if rss <= 0 or (rss_trend - rss) / q / (rss / dof) < 30.0:
+    def fit(kept):
+        X = np.column_stack([trend] + [np.column_stack([np.cos(k * th[sel]), np.sin(k * th[sel])]) for k in kept])
+        coef = np.linalg.lstsq(X, w[sel], rcond=None)[0]
+        return coef, float(np.sum((w[sel] - X @ coef) ** 2)), sel.size - X.shape[1], np.linalg.cond(X)
+
+    # keep only the orders that are there: an order fitted to noise would add its noise
+    # back amplified k·ω times through the derivative
+    kept = list(orders)
+    while kept:
+        coef, rss, dof, cond = fit(kept)
+        if dof < 20 or cond > 1e8 or rss <= 0:
+            return plain
+        f_drop = [((fit([j for j in kept if j != k])[1] - rss) / 2.0) / (rss / dof) for k in kept]
+        worst = int(np.argmin(f_drop))
+        if f_drop[worst] >= 30.0:
+            break
+        kept.pop(worst)
+    if not kept:
         return plain
     a, b = coef[trend.shape[1]::2], coef[trend.shape[1] + 1::2]
-    k = np.asarray(orders, dtype=float)
+    k = np.asarray(kept, dtype=float)
     ok = np.isfinite(th)
     phase = np.outer(np.where(ok, th, 0.0), k)
     ripple = np.where(ok, np.cos(phase) @ a + np.sin(phase) @ b, np.nan)
