@@ -16,8 +16,9 @@ everything the program depends on:
 
 Semantics are those of ``equinox.filter_jit``: arrays (NumPy or JAX) are traced,
 every other leaf is static.  Outputs must be pytrees of arrays.  Anything that
-cannot be kept safely — a static argument whose ``repr`` holds a memory address,
-a program with a host callback, a cache folder that cannot be written, a file
+cannot be kept safely — a static argument whose ``repr`` holds a memory address
+or whose class is not motorid's (its code is not in the fingerprint), a program
+with a host callback, a cache folder that cannot be written, a file
 that does not load — falls back to compiling in memory, with the same result.
 Files live in ``$MOTORID_CACHE_DIR/aot/<source version>/`` beside the XLA
 cache (30-200 kB each); the folders of all but the last few source versions are
@@ -73,6 +74,16 @@ def _cpu_flags() -> str:
 
 def _is_array(x) -> bool:
     return isinstance(x, (np.ndarray, jax.Array))
+
+
+_KNOWN_MODULES = ("motorid", "builtins", "numpy")
+
+
+def _keyable(x) -> bool:
+    """Whether a static argument's repr identifies it: plain values, and objects of
+    motorid's own classes (whose code the source fingerprint covers).  An object of
+    a class defined elsewhere (a user's mechanism) could change behind the same repr."""
+    return x is None or type(x).__module__.split(".")[0] in _KNOWN_MODULES
 
 
 KEEP_VERSIONS = 4  # folders of other source versions kept (other checkouts may share the cache)
@@ -181,7 +192,8 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
         """(compiled program, the file it was loaded from or None)."""
         treedef_, static, avals = key
         text = repr((self.name, str(treedef_), static, avals))
-        folder = None if " at 0x" in text or not use_disk else _folder()
+        portable = use_disk and " at 0x" not in text and all(_keyable(x) for x in static)
+        folder = _folder() if portable else None
         path = None
         if folder is not None:
             digest = hashlib.sha256(text.encode()).hexdigest()[:40]

@@ -152,3 +152,22 @@ def test_t_quantile_without_scipy_stats_matches_scipy(dof, level):
     from motorid.identify.results import interval_factor
 
     assert interval_factor(dof, level) == pytest.approx(stats.t.ppf(0.5 + level / 2, dof), rel=1.2e-4)
+
+
+def test_static_object_of_a_foreign_class_is_not_kept_on_disk(tmp_path, monkeypatch):
+    from motorid import _aot
+
+    class Setting:  # a user's class: its code is not in motorid's fingerprint
+        def __repr__(self):
+            return "<setting>"
+
+    monkeypatch.setattr(_aot._jaxconfig, "CACHE_DIR", str(tmp_path))
+
+    def f(x, setting):
+        return x * 2.0
+
+    g = _aot.cached_jit(f)
+    np.testing.assert_allclose(np.asarray(g(np.ones(3), Setting())), 2.0)
+    assert not list(tmp_path.rglob("*.bin"))
+    g(np.ones(3), "plain text")  # a plain static value: kept
+    assert len(list(tmp_path.rglob("f-*.bin"))) == 1
