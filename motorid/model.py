@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
+from motorid._aot import cached_jit
 from motorid.physics import flow, torque
 from motorid.physics.kinematics import port_a_sum, port_a_sum_approx, ripple_coefficients
 from motorid.spec import MotorSpec  # noqa: F401  (re-exported)
@@ -141,13 +142,7 @@ def _assemble_samples(pistons: int, coefficients, theta, speed, acceleration, p_
     )
 
 
-def _late_cached_jit():
-    from motorid._aot import cached_jit  # motorid._aot imports this module's package
-
-    return cached_jit(_assemble_samples)
-
-
-_assemble_samples_jit = _late_cached_jit()
+_assemble_samples_jit = cached_jit(_assemble_samples)
 
 
 class Channels(NamedTuple):
