@@ -413,16 +413,21 @@ def _dense_cholesky_solver():
     return lx.Normal(DenseCholesky())
 
 
+def _run_levenberg_marquardt(residual, y0, args, rtol, atol, max_steps):
+    """Optimistix LM → (y, steps, converged), arrays only (so the program can be kept on disk)."""
+    # normal equations with Cholesky: the damped system is parameters × parameters,
+    # eight times faster than QR of a tall Jacobian; float64 and the log/scale
+    # transform keep its condition number harmless
+    optx, linear_solver = _optimistix()
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
+    sol = optx.least_squares(residual, solver, y0, args=args, max_steps=max_steps, throw=False)
+    return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+
+
 @cached_jit
 def _levenberg_marquardt(y0, ctx: _Ctx, rtol, atol, max_steps):
     """Optimistix LM on the full residual → (y, steps, converged)."""
-    # normal equations with Cholesky: the damped system is parameters × parameters,
-    # eight times faster here than QR of the tall Jacobian; float64 and the
-    # log/scale transform keep its condition number harmless
-    optx, linear_solver = _optimistix()
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
-    sol = optx.least_squares(_residual_unconstrained, solver, y0, args=ctx, max_steps=max_steps, throw=False)
-    return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+    return _run_levenberg_marquardt(_residual_unconstrained, y0, ctx, rtol, atol, max_steps)
 
 
 def bucket(n: int, minimum: int = 64) -> int:
@@ -786,11 +791,8 @@ def _compressed_residual(y, c: _CompressedCtx):
 
 @cached_jit
 def _levenberg_marquardt_compressed(y0, c: _CompressedCtx, rtol, atol, max_steps):
-    """Optimistix LM on the compressed residual → (y, steps, converged) (arrays only: kept on disk)."""
-    optx, linear_solver = _optimistix()
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
-    sol = optx.least_squares(_compressed_residual, solver, y0, args=c, max_steps=max_steps, throw=False)
-    return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+    """Optimistix LM on the compressed residual → (y, steps, converged)."""
+    return _run_levenberg_marquardt(_compressed_residual, y0, c, rtol, atol, max_steps)
 
 
 class _CompressedBackend:
