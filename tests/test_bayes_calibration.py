@@ -59,3 +59,19 @@ def test_posterior_integrates_the_breakaway_noise_out(fitted):
     doc = result_document(ls, spec, bayes=post)
     assert doc["mcmc"]["breakaway_noise"].startswith("integrated out")
     assert result_document(ls, spec, bayes=fixed)["mcmc"]["breakaway_noise"].startswith("held")
+
+
+def test_posterior_carries_the_smoothed_viscosity_error(fitted):
+    """The viscosity's run-level error is in the least-squares covariance
+    (covariance_viscosity) and the posterior is convolved with it: K_L0's
+    posterior is as wide as its standard error, wider than the data alone give."""
+    from motorid.identify.bayes import sample_posterior
+
+    ls, spec = fitted
+    i = ls.free.index("KL0")
+    visc = ls.covariance_viscosity[i, i]
+    data_only = math.sqrt(ls.covariance[i, i] - visc)
+    assert visc > 0.3 * data_only**2
+    post = sample_posterior(ls, spec, seed=6, progress=False)
+    assert post.std["KL0"] == pytest.approx(ls.std["KL0"], rel=0.12)
+    assert post.std["KL0"] > 1.15 * data_only

@@ -36,6 +36,14 @@ Priors (weakly informative, physically positive):
 These priors are hundreds of standard errors wide on any campaign that
 identifies the parameter, so the posterior is the likelihood's.
 
+The viscosity the model sees is the extraction's smoothed curve per run
+(:func:`motorid.identify.extract.smooth_viscosity`), whose error is common to a
+run.  Its effect on the parameters is linear to first order, β(μ + δμ) ≈ β(μ) +
+G z with z ~ N(0, I) per run (the least-squares fit's ``covariance_viscosity`` =
+G Gᵀ), so marginalizing it convolves the posterior with N(0, G Gᵀ): every draw
+of the chain is moved by its own draw of that Gaussian (exact for a model
+linear in μ under flat priors).
+
 Walkers start in a small ball drawn from the least-squares covariance; the run
 goes on in chunks until it is at least ``min_tau_multiple`` (50) integrated
 autocorrelation times long and τ has settled, or until ``max_steps``.
@@ -317,6 +325,13 @@ def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
     else:
         expansion_gap = None
     chain = center + chain_z * scale
+    visc = getattr(ls, "covariance_viscosity", None)
+    if visc is not None and np.any(visc):
+        # the smoothed viscosity's run-level error (see the module docstring): each
+        # draw moved by its own draw from N(0, covariance_viscosity)
+        w, v = np.linalg.eigh(0.5 * (visc + visc.T))
+        root = v * np.sqrt(np.clip(w, 0.0, None))
+        chain = chain + rng.standard_normal(chain.shape) @ root.T
     flat = chain[burn::thin].reshape(-1, ndim)
     q = np.percentile(flat, [2.5, 50.0, 97.5], axis=0)
     kept = (sampler.iteration - burn) * walkers

@@ -64,6 +64,10 @@ class ExtractSettings:
     shaft_orders : shaft orders of a speed ripple locked to the shaft angle, whose
         acceleration is taken from θ, not from differences of sampled speed [-]
     stuck_turn : most the shaft angle may change before a breakaway, creep included [rad]
+    smooth_viscosity : replace each running run's viscometer readings by a
+        polynomial in time (:func:`smooth_viscosity`) where the readings are a
+        slow curve plus white noise; False keeps every reading as read [-]
+    viscosity_max_degree : highest degree of that polynomial [-]
     """
 
     rest_speed: float = 2e-3
@@ -76,6 +80,8 @@ class ExtractSettings:
     accel_window: int = 9
     shaft_orders: tuple = (1, 2)
     stuck_turn: float = 0.2
+    smooth_viscosity: bool = True
+    viscosity_max_degree: int = 5
 
 
 @dataclass
@@ -84,7 +90,8 @@ class Dataset:
 
     running : :class:`~motorid.model.Samples` of the steady-state samples of the
         running runs (direction = sign of the run's median speed; acceleration
-        from a smoothed derivative of speed within the run)
+        from a smoothed derivative of speed within the run; viscosity smoothed
+        per run, :func:`smooth_viscosity`)
     measured : channel → array aligned with ``running``: "torque" [N·m], "q_a",
         "q_b", "q_case" [m³/s]; NaN where the sensor had no reading
     run_of_sample : index of each running sample's run into ``runs`` [-]
@@ -92,7 +99,9 @@ class Dataset:
     runs : one row per run: run, protocol, file, n_samples, n_steady,
         speed_median_rad_s, dp_median_Pa (P_A − P_B), psum_median_Pa (P_A + P_B),
         temp_median_C, direction (±1, 0 where none), onset_time_s (startability),
-        excluded (why the run gives nothing, "" where it does)
+        excluded (why the run gives nothing, "" where it does), viscosity_degree
+        (degree of the curve that replaced the viscometer's readings, −1 where
+        they are used as read), viscosity_noise_Pa_s (the readings' scatter about it)
     events : :class:`~motorid.model.Samples` at the breakaway instants (θ, P_A,
         P_B, P_c, μ at the onset; speed 0; direction = the way the shaft broke away)
     held_torque : load torque held in the stuck phase of each event [N·m]
@@ -100,6 +109,8 @@ class Dataset:
     onset_time : breakaway instant of each event, run time [s]
     excluded : reason → count (samples or runs, as the reason says)
     notes : one line per run that gave less than it might, in words
+    viscosity_error : the error the smoothed viscosity of each run still carries
+        (:class:`ViscositySmoothing`), or None where every reading is used as read
     """
 
     running: Samples
@@ -114,6 +125,7 @@ class Dataset:
     onset_time: np.ndarray
     excluded: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    viscosity_error: "ViscositySmoothing | None" = None
 
     @property
     def n_running(self) -> int:
@@ -318,6 +330,121 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
     ripple = np.where(ok, np.cos(phase) @ a + np.sin(phase) @ b, np.nan)
     ripple_rate = np.where(ok, np.cos(phase) @ (k * b) - np.sin(phase) @ (k * a), 0.0)
     return smoothed_acceleration(t, w - ripple, window) + w * ripple_rate
+
+
+# ----------------------------------------------------------------- viscosity
+
+VISCOSITY_MODES = 6  # columns of ViscositySmoothing.factor: degree 5 at most
+
+
+@dataclass(frozen=True)
+class ViscositySmoothing:
+    """What is left of the viscometer's error once each run's readings are smoothed.
+
+    The viscosity of a steady run follows the oil temperature, which drifts
+    slowly; the viscometer adds noise sample by sample (0.3 % is typical).  The
+    leakage flows go as 1/μ and the viscous torque as μ, so a reading's noise
+    multiplies them sample by sample, and the fit conditions on it (errors in
+    variables: the leakage coefficients are biased low by ≈ 2σ_rel² and the
+    harmonics of K_L(θ) scatter more).  :func:`smooth_viscosity` replaces the
+    readings by a polynomial in time; its coefficients are still uncertain, and
+    that error is common to the run: it does not average out over the run's
+    samples.  It is kept here so that the fit can carry it into the parameters'
+    covariance (:func:`motorid.identify.least_squares.fit_least_squares`).
+
+    Per run (aligned with ``Dataset.runs``): ``center`` and ``half_span`` [s] map
+    run time to u ∈ [−1, 1], the Chebyshev variable; ``factor`` (runs,
+    VISCOSITY_MODES, VISCOSITY_MODES) [Pa·s] is L with L Lᵀ the covariance of the
+    run's Chebyshev coefficients (zero for a run whose readings are used as read).
+    The smoothed viscosity's error at a sample is then Σₖ modes[k]·zₖ with z
+    standard normal per run (:meth:`modes`).
+    """
+
+    center: np.ndarray
+    half_span: np.ndarray
+    factor: np.ndarray
+
+    def modes(self, run_of_sample, time) -> np.ndarray:
+        """(n, VISCOSITY_MODES) error modes of the smoothed viscosity at the samples [Pa·s]."""
+        r = np.asarray(run_of_sample, dtype=int)
+        u = (np.asarray(time, dtype=float) - self.center[r]) / self.half_span[r]
+        basis = np.polynomial.chebyshev.chebvander(u, VISCOSITY_MODES - 1)
+        return np.einsum("nj,njk->nk", basis, self.factor[r])
+
+    @property
+    def any(self) -> bool:
+        return bool(np.any(self.factor))
+
+
+def smooth_viscosity(time, viscosity, max_degree: int = 5):
+    """One steady run's viscometer readings as a slow curve → (smoothed, degree, σ, factor, center, half_span).
+
+    time [s], viscosity [Pa·s] of the run's steady samples (finite).  The curve
+    is a Chebyshev polynomial in time, fitted by least squares with readings
+    beyond 4 robust deviations left out (spikes); its degree is the lowest
+    after which one more degree no longer lowers the residual sum of squares
+    by more than max(log n, 10) residual variances.  It replaces the readings
+    only where what is left is white noise: the residuals' lag-one
+    autocorrelation, in time order, must be below 3/√n (a change the curve
+    cannot follow, such as a temperature step, leaves it near one).  Otherwise,
+    where the run is shorter than 20 samples, or the readings do not scatter at
+    all (a held viscosity), the readings are returned as read, with degree −1
+    and a zero factor.  σ is the readings' deviation about the curve [Pa·s]; factor
+    (VISCOSITY_MODES, VISCOSITY_MODES) is the Cholesky factor of the curve's
+    coefficient covariance σ²(XᵀX)⁻¹ (see :class:`ViscositySmoothing`).
+    """
+    t = np.asarray(time, dtype=float)
+    mu = np.asarray(viscosity, dtype=float)
+    n = t.size
+    center = 0.5 * (t.min() + t.max()) if n else 0.0
+    half = 0.5 * float(np.ptp(t)) if n else 0.0
+    as_read = (mu.copy(), -1, math.nan, np.zeros((VISCOSITY_MODES, VISCOSITY_MODES)), center, max(half, 1.0))
+    if n < 20 or half <= 0 or not np.all(np.isfinite(mu)) or not np.all(np.isfinite(t)):
+        return as_read
+    order = np.argsort(t, kind="stable")
+    d = np.diff(mu[order])
+    noise_diff = _MAD * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
+    if not noise_diff > 0:
+        return as_read
+    u = (t - center) / half
+    X_all = np.polynomial.chebyshev.chebvander(u, min(max_degree, VISCOSITY_MODES - 1))
+
+    def fit(degree):
+        X = X_all[:, : degree + 1]
+        keep = np.ones(n, bool)
+        for _ in range(4):
+            coef = np.linalg.lstsq(X[keep], mu[keep], rcond=None)[0]
+            r = mu - X @ coef
+            sigma = _MAD * float(np.median(np.abs(r[keep] - np.median(r[keep]))))
+            new = np.abs(r) <= max(4.0 * sigma, 1e-300)
+            if new.sum() < degree + 10 or np.array_equal(new, keep):
+                break
+            keep = new
+        rss = float(np.sum(r[keep] ** 2))
+        return coef, keep, rss, sigma
+
+    penalty = max(math.log(n), 10.0)
+    degree, (coef, keep, rss, sigma) = 0, fit(0)
+    while degree < X_all.shape[1] - 1 and n > degree + 12:
+        nxt = fit(degree + 1)
+        var = nxt[2] / max(nxt[1].sum() - degree - 2, 1)
+        if rss - nxt[2] <= penalty * var:
+            break
+        degree, (coef, keep, rss, sigma) = degree + 1, nxt
+    # what is left must be white: lag-one autocorrelation of the (clipped) residuals in
+    # time order within 3/√n of zero (a curve the polynomial misses leaves it positive)
+    rr = np.clip((mu - X_all[:, : degree + 1] @ coef)[order], -4.0 * sigma, 4.0 * sigma)
+    power = float(rr @ rr)
+    if not (power > 0 and float(rr[:-1] @ rr[1:]) / power <= 3.0 / math.sqrt(n)):
+        return as_read
+    X = X_all[keep, : degree + 1]
+    sigma_ls = math.sqrt(rss / max(keep.sum() - degree - 1, 1))
+    factor = np.zeros((VISCOSITY_MODES, VISCOSITY_MODES))
+    try:
+        factor[: degree + 1, : degree + 1] = np.linalg.cholesky(sigma_ls**2 * np.linalg.inv(X.T @ X))
+    except np.linalg.LinAlgError:
+        return as_read
+    return X_all[:, : degree + 1] @ coef, degree, sigma_ls, factor, center, half
 
 
 # ----------------------------------------------------------------- breakaway
@@ -632,12 +759,17 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
     excluded: dict = {}
     notes: list = []
     rows, picks, accel, run_of_sample, directions, events = [], [], [], [], [], []
+    visc = []
+    n_runs = len(uniques)
+    visc_center, visc_half = np.zeros(n_runs), np.ones(n_runs)
+    visc_factor = np.zeros((n_runs, VISCOSITY_MODES, VISCOSITY_MODES))
     for r, key in enumerate(uniques):
         pos = order[bounds[r]:bounds[r + 1]]
         cols = {c: v[pos] for c, v in numeric.items()}
         protocol = str(protocol_names[protocol_codes[pos[0]]])
         row = {"run": key, "protocol": protocol, "file": str(file_names[file_codes[pos[0]]]), "n_samples": pos.size, "n_steady": 0,
-               "direction": 0.0, "onset_time_s": math.nan, "excluded": ""}
+               "direction": 0.0, "onset_time_s": math.nan, "excluded": "", "viscosity_degree": -1,
+               "viscosity_noise_Pa_s": math.nan}
         used = np.arange(pos.size)
         if protocol == STARTABILITY:
             event, why = _startability_run(key, cols, settings, excluded, notes)
@@ -657,6 +789,13 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
                                            settings.accel_window, settings.shaft_orders)
                 picks.append(pos[chosen])
                 accel.append(acc[chosen])
+                mu = cols["viscosity_Pa_s"][chosen]
+                if settings.smooth_viscosity:
+                    mu, degree, noise, factor, visc_center[r], visc_half[r] = smooth_viscosity(
+                        cols["time_s"][chosen], mu, settings.viscosity_max_degree)
+                    visc_factor[r] = factor
+                    row.update(viscosity_degree=degree, viscosity_noise_Pa_s=noise)
+                visc.append(mu)
                 run_of_sample.append(np.full(chosen.size, r))
                 directions.append(np.full(chosen.size, direction))
                 row["n_steady"] = int(chosen.size)
@@ -669,7 +808,8 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
 
     runs = pd.DataFrame(rows, columns=["run", "protocol", "file", "n_samples", "n_steady",
                                        "speed_median_rad_s", "dp_median_Pa", "psum_median_Pa",
-                                       "temp_median_C", "direction", "onset_time_s", "excluded"])
+                                       "temp_median_C", "direction", "onset_time_s", "excluded",
+                                       "viscosity_degree", "viscosity_noise_Pa_s"])
     join = lambda parts, dtype=float: (np.concatenate(parts).astype(dtype) if parts  # noqa: E731
                                        else np.zeros(0, dtype=dtype))
     index = join(picks, int)
@@ -680,7 +820,7 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
                            np.where(np.isfinite(run_temp), run_temp, all_temp if math.isfinite(all_temp) else 40.0))
     running = make_samples(spec, numeric["theta_rad"][index], numeric["speed_rad_s"][index],
                            numeric["p_a_Pa"][index], numeric["p_b_Pa"][index], numeric["p_case_Pa"][index],
-                           numeric["viscosity_Pa_s"][index], acceleration=join(accel),
+                           join(visc), acceleration=join(accel),
                            direction=join(directions), temperature=temperature, time=numeric["time_s"][index])
     measured = {name: numeric[col][index] for name, col in MEASURED_CHANNELS.items()}
 
@@ -694,5 +834,6 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
         running=running, measured=measured, run_of_sample=run_of_sample_arr, frame_index=index, runs=runs,
         events=event_samples, held_torque=ev("held"), event_runs=[e["run"] for e in events],
         run_of_event=np.array([e["run_index"] for e in events], dtype=int), onset_time=ev("onset"),
-        excluded={k: v for k, v in excluded.items() if v}, notes=notes)
+        excluded={k: v for k, v in excluded.items() if v}, notes=notes,
+        viscosity_error=(ViscositySmoothing(visc_center, visc_half, visc_factor) if np.any(visc_factor) else None))
 

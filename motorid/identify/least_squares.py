@@ -50,6 +50,8 @@ class FitOptions:
     # models on equal terms, or to hold runs out of a fit
     fixed_noise: dict | None = None
     fixed_inliers: dict | None = None
+    # carry the smoothed viscosity's run-level error (Dataset.viscosity_error) into the covariance
+    viscosity_error: bool = True
 
 
 @dataclass
@@ -79,6 +81,9 @@ class FitResult:
     params_all: dict  # every parameter incl. held ones (for predictions)
     mechanisms: tuple = ()
     problem: object = None  # the reduced problem (cells, noise, inliers) for the sampler
+    # the share of `covariance` that the smoothed viscosity's run-level error carries
+    # (over `free`; None where every viscosity reading was used as read)
+    covariance_viscosity: np.ndarray | None = None
 
     @property
     def reduced_chi2(self) -> float:
@@ -662,8 +667,11 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     chi2 = float(sum(np.sum((residuals[c][inliers[c]] / sig[c][inliers[c]]) ** 2) for c in obs))
     dof = max(sum(used.values()) - len(free), 1)
     cov = _covariance(JtJ) if free else np.zeros((0, 0))
+    cov_visc = viscosity_covariance(problem, values, cov) if (free and opt.viscosity_error) else None
     if chi2 / dof > 1.0:
         cov = cov * (chi2 / dof)  # noise underestimated: widen, never narrow
+    if cov_visc is not None:
+        cov = cov + cov_visc
     std = np.sqrt(np.clip(np.diag(cov), 0, None)) if free else np.zeros(0)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std) if free else cov
@@ -701,7 +709,65 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         outliers={c: int(np.sum(np.isfinite(obs[c]) & ~inliers[c])) for c in obs},
         used=used, chi2=chi2, dof=dof, steps=steps_total, converged=bool(converged), warnings=warnings,
         residuals=residuals, sigma=sig, inliers=inliers, params_all=all_params, mechanisms=tuple(mechanisms), problem=problem,
+        covariance_viscosity=cov_visc,
     )
+
+
+@cached_jit
+def _viscosity_sensitivity(values: dict, ctx: _Ctx):
+    """∂r/∂β (rows × free) and ∂r/∂μ (rows) of the weighted residual of the cells,
+    r = w·(observed − predicted), μ the cells' viscosity (each cell's prediction
+    depends on its own viscosity only, so one tangent of ones gives every cell's)."""
+    jac = jax.jacfwd(_residual_natural)(values, ctx)
+    J = jnp.stack([jac[k] for k in ctx.free], axis=1)
+
+    def of_viscosity(mu):
+        return _residual_natural(values, ctx._replace(running=ctx.running._replace(viscosity=mu)))
+
+    mu = ctx.running.viscosity
+    return J, jax.jvp(of_viscosity, (mu,), (jnp.ones_like(mu),))[1]
+
+
+def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray) -> np.ndarray | None:
+    """Parameter covariance from the smoothed viscosity's run-level error [SI²].
+
+    The extraction replaces each run's viscometer readings by a curve in time
+    (:func:`motorid.identify.extract.smooth_viscosity`); the curve's error δμ_r =
+    Σₖ modesₖ zₖ (z standard normal per run) is common to the run's samples, so
+    it does not show in the residual scatter the noise levels come from.  To
+    first order it moves the estimate by dβ/dz = (JᵀJ)⁻¹ Jᵀ (∂r/∂μ · modes) (J
+    and r weighted; a two-step estimator's plug-in correction, Murphy & Topel
+    1985), and adds Σ_run,k (dβ/dzₖ)(dβ/dzₖ)ᵀ to the covariance.  ``cov`` is
+    (JᵀJ)⁻¹ over ``problem.free``.  None where no run's viscosity was smoothed.
+    """
+    verr = getattr(problem.data, "viscosity_error", None)
+    if verr is None or not verr.any or not problem.has_running or problem.cells is None:
+        return None
+    modes = verr.modes(problem.run_of, np.asarray(problem.data.running.time))
+    n_cells = problem.n_cells
+    counts = np.maximum(np.bincount(problem.cell_of, minlength=n_cells), 1)
+    cell_modes = np.stack([np.bincount(problem.cell_of, weights=modes[:, k], minlength=n_cells)
+                           for k in range(modes.shape[1])], axis=1) / counts[:, None]
+    ctx = problem.ctx()
+    J, g = (np.asarray(a) for a in _viscosity_sensitivity(_as_jnp(values), ctx))
+    n_runs = int(problem.cell_run.max()) + 1
+    B = np.zeros((n_runs, modes.shape[1], J.shape[1]))  # Jᵀ ∂r/∂z per run and mode
+    start = 0
+    for c in CHANNELS:
+        if c not in ctx.observed:
+            continue
+        size = int(np.asarray(ctx.observed[c]).size)
+        if c in RUNNING_CHANNELS:
+            Jg = J[start:start + n_cells] * g[start:start + n_cells, None]  # (cells, free)
+            for k in range(modes.shape[1]):
+                if np.any(cell_modes[:, k]):
+                    for j in range(J.shape[1]):
+                        B[:, k, j] += np.bincount(problem.cell_run, weights=Jg[:, j] * cell_modes[:, k],
+                                                  minlength=n_runs)
+        start += size
+    A = B.reshape(-1, J.shape[1]) @ cov  # dβ/dz, one row per (run, mode)
+    out = A.T @ A
+    return 0.5 * (out + out.T)
 
 
 def _scales(values: dict, free: list, mechanisms) -> np.ndarray:

@@ -48,8 +48,10 @@ def interval_dof(ls: FitResult) -> dict:
                        weights={"breakaway": ctx.weights["breakaway"]})
     values = {k: np.asarray(ls.values[k], dtype=np.float64) for k in free}
     A_brk = np.asarray(_normal_equations(values, brk)[0])
-    V = np.asarray(ls.covariance) / max(ls.reduced_chi2, 1.0)  # the fit widens V by χ²/dof > 1
-    d = np.diag(V)
+    total = np.asarray(ls.covariance)
+    visc = getattr(ls, "covariance_viscosity", None)
+    V = (total - (0.0 if visc is None else visc)) / max(ls.reduced_chi2, 1.0)  # the fit widens V by χ²/dof > 1
+    d = np.diag(total)  # the viscosity's share rests on hundreds of readings per run: ν = ∞
     with np.errstate(invalid="ignore", divide="ignore"):
         f = np.clip(np.diag(V @ A_brk @ V) / d, 0.0, 1.0)
     for i, k in enumerate(free):

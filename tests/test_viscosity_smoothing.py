@@ -1,0 +1,113 @@
+"""The viscometer's readings smoothed per run, and the error that smoothing leaves carried into the fit."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from motorid.identify.extract import ViscositySmoothing, extract, smooth_viscosity
+from motorid.identify.least_squares import FitOptions, fit_least_squares
+
+from conftest import simulated
+
+
+def _slow_curve(t):
+    # 40 mPa·s oil warming slowly: viscosity falls about 2 % over the run, not a polynomial
+    return 0.04 * np.exp(-0.02 * (t - t[0]) / np.ptp(t)) * (1 + 0.002 * np.sin(1.3 * t / np.ptp(t)))
+
+
+def test_smoothed_viscosity_error_matches_its_stated_covariance():
+    """Over many noise draws the smoothed curve's error at every sample has the
+    variance its factor states (z² averages to 1), and is 1/√n-ish of the
+    reading noise: the run-level error, not the readings' 0.3 %."""
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 20.0, 400)
+    true = _slow_curve(t)
+    z2, ratio = [], []
+    for _ in range(200):
+        mu = true * (1 + 0.003 * rng.standard_normal(t.size))
+        smooth, degree, sigma, factor, center, half = smooth_viscosity(t, mu)
+        assert degree >= 0
+        err = smooth - true
+        var = np.sum(ViscositySmoothing(np.array([center]), np.array([half]), factor[None]).modes(
+            np.zeros(t.size, int), t) ** 2, axis=1)
+        z2.append(np.mean(err**2 / var))
+        ratio.append(np.std(err / true) / 0.003)
+    assert 0.8 < np.mean(z2) < 1.25
+    assert np.mean(ratio) < 0.2  # the readings' scatter is gone, only the curve's error is left
+
+
+def test_spikes_do_not_move_the_curve():
+    rng = np.random.default_rng(4)
+    t = np.linspace(0.0, 10.0, 300)
+    true = np.full(t.size, 0.03)
+    mu = true * (1 + 0.003 * rng.standard_normal(t.size))
+    mu[[50, 51, 200]] = 0.06
+    smooth, degree, *_ = smooth_viscosity(t, mu)
+    assert degree >= 0
+    assert np.max(np.abs(smooth / true - 1)) < 0.002
+
+
+@pytest.mark.parametrize("case", ["step", "held", "short"])
+def test_readings_that_are_not_a_slow_curve_plus_white_noise_are_used_as_read(case):
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 10.0, 300)
+    if case == "step":  # oil temperature steps halfway: no low-degree polynomial follows it
+        mu = np.where(t < 5.0, 0.04, 0.036) * (1 + 0.003 * rng.standard_normal(t.size))
+    elif case == "held":  # a bench that logs one held value
+        mu = np.full(t.size, 0.04)
+    else:
+        t, mu = t[:15], 0.04 * (1 + 0.003 * rng.standard_normal(15))
+    smooth, degree, sigma, factor, *_ = smooth_viscosity(t, mu)
+    assert degree == -1
+    np.testing.assert_array_equal(smooth, mu)
+    assert not np.any(factor)
+
+
+def test_fit_carries_the_viscosity_error_as_a_refit_would_show_it():
+    """covariance_viscosity rests on dβ/dz from the linearized normal equations;
+    moving one run's smoothed viscosity by one of its error modes and refitting
+    (noise and inliers held) must move the parameters by that much."""
+    frame, spec, truth = simulated(seed=7)
+    data = extract(frame, spec)
+    assert data.viscosity_error is not None and data.viscosity_error.any
+    assert (data.runs["viscosity_degree"] >= 0).sum() >= 10
+    ls = fit_least_squares(data, spec)
+    V = ls.covariance_viscosity
+    assert V is not None and V.shape == ls.covariance.shape
+    free = ls.free
+    i = free.index("KL0")
+    # the run-level error of the viscosity is a real share of K_L0's variance
+    assert V[i, i] > 0.05 * ls.covariance[i, i]
+
+    modes = data.viscosity_error.modes(data.run_of_sample, np.asarray(data.running.time))
+    hold = FitOptions(fixed_noise={c: ls.noise_by_run[c] for c in ls.noise_by_run} | {"breakaway": ls.noise["breakaway"]},
+                      fixed_inliers=ls.inliers)
+    from motorid.identify.least_squares import _covariance, viscosity_covariance
+
+    base = fit_least_squares(data, spec, options=hold)
+    # the share of V that one (run, mode) pair contributes, from a refit
+    counts = np.bincount(data.run_of_sample)
+    run = int(np.argmax(counts))  # the longest run
+    on = data.run_of_sample == run
+    mu = np.asarray(data.running.viscosity).copy()
+    step = 30.0  # a large move, so that the refit's change stands well above its convergence
+    mu[on] += step * modes[on, 0]
+    moved = fit_least_squares(dataclasses.replace(data, running=data.running._replace(viscosity=mu)), spec, options=hold)
+    d_refit = np.array([(moved.values[k] - base.values[k]) / step for k in free])
+    # the same from the linear formula, for this run and mode alone
+    only = np.zeros_like(data.viscosity_error.factor)
+    only[run, :, 0] = data.viscosity_error.factor[run, :, 0]
+    one = dataclasses.replace(data, viscosity_error=ViscositySmoothing(data.viscosity_error.center,
+                                                                       data.viscosity_error.half_span, only))
+    problem = base.problem
+    problem.data = one
+    from motorid.identify.least_squares import _backend
+
+    JtJ = _backend(problem, base.values, free, FitOptions()).normal(base.values)[0]
+    V1 = viscosity_covariance(problem, base.values, _covariance(JtJ))
+    # (the parameters this mode moves most; a move 30× smaller, such as K_L_a1's here, also
+    # feels the refit's exact Hessian, which differs from Gauss-Newton's JᵀJ by Σ r ∂²r)
+    for k in ("KL0", "KL_b1", "KAB"):
+        j = free.index(k)
+        assert abs(d_refit[j]) == pytest.approx(np.sqrt(V1[j, j]), rel=0.02), k
