@@ -35,7 +35,7 @@ OUT_COLUMN = {"torque": "torque_Nm", "q_a": "q_a_m3_s", "q_b": "q_b_m3_s", "q_ca
 SBC_PRIOR_REL = 0.05  # calibration prior: Normal(truth_demo, 5 % of it), truncated positive
 SBC_DRAWS = 99  # L posterior draws per replication → ranks 0..L
 N_REP = 400  # least-squares replications (±2.3 points binomial error on a 68 % coverage)
-N_DIAG = 40  # of them also refitted for the diagnosis (true viscosity; shaft-resolved acceleration)
+N_DIAG = 40  # of them also refitted for the diagnosis (true viscosity; readings as read; shaft order 1)
 
 
 def _setup():
@@ -59,9 +59,11 @@ def noise_model_sigma(spec, truth_params, prots, camp, data, unresolved=True):
     """Per-sample σ of each running channel at the truth: the sensor model at the
     true channel value (noise² + (relative·|x|)² + resolution²/12), plus the
     measured inputs' noise carried through the model (σ_in · ∂channel/∂input for
-    the port and case pressures, speed, viscosity, and the acceleration the fit
-    takes from the noisy speed by a 9-point quadratic derivative).  Also returns
-    the true-operating-point Samples."""
+    the port and case pressures, speed, the acceleration the fit takes from the
+    noisy speed by a 9-point quadratic derivative, and the viscosity in runs
+    whose readings the extraction uses as read; where it smooths them the
+    viscosity is a nuisance curve per run, :func:`viscosity_nuisance_bound`).
+    Also returns the true-operating-point Samples."""
     import jax
     import jax.numpy as jnp
 
@@ -112,9 +114,83 @@ def noise_model_sigma(spec, truth_params, prots, camp, data, unresolved=True):
             for pr in np.unique(proc):
                 sel = proc == pr
                 sig2[sel] = _var(sensors[pr][IN_COLUMN[name]], tf[IN_COLUMN[name]].to_numpy()[sel])
+            if name == "viscosity":
+                sig2 = np.where(_smoothed_runs(data)[data.run_of_sample], 0.0, sig2)
         for c in OUT_COLUMN:
             var[c] += np.asarray(getattr(d, c)) ** 2 * sig2
     return {c: np.sqrt(v) for c, v in var.items()}, true_s
+
+
+def _smoothed_runs(data):
+    """Which runs' viscosity the extraction replaced by a curve in time."""
+    return data.runs["viscosity_degree"].to_numpy() >= 0
+
+
+def viscosity_nuisance_bound(spec, truth_params, names, prots, camp, data, sigma, true_s, info):
+    """Cramér–Rao bound with each smoothed run's viscosity a nuisance curve.
+
+    Where the extraction smooths a run's viscometer readings, the bound's model
+    is: the run's true viscosity is a Chebyshev polynomial in time of the degree
+    the extraction chose (coefficients c_r unknown), the viscometer reads it with
+    its noise model, and the running channels see it through the model.  Joint
+    Fisher information of (β, c): I_ββ = ``info`` (outputs), I_βc = Σ J (g X)ᵀ/σ²,
+    I_cc = Σ (g X)(g X)ᵀ/σ² + Xᵀ X/σ_μ², with J = ∂channel/∂β and g =
+    ∂channel/∂μ per sample and X the run's basis; the bound on β is the Schur
+    complement's inverse.  Returns (crb dict, Fisher matrix of β)."""
+    import jax
+    import jax.numpy as jnp
+
+    from motorid import design, model
+    from motorid.identify.extract import VISCOSITY_MODES
+
+    smoothed = _smoothed_runs(data)
+    if not smoothed.any() or data.viscosity_error is None:
+        return design.cramer_rao(info, names)[0], info
+    sensors = {p.procedure: p.sensors.channels for p in prots}
+    proc = data.runs["protocol"].to_numpy()[data.run_of_sample]
+    tf = camp.true_frame.iloc[data.frame_index]
+    held = {k: v for k, v in truth_params.items() if k not in names}
+    values = {k: jnp.asarray(float(truth_params[k])) for k in names}
+
+    def f(v, mu):
+        out = model.predict(model.as_jax({**held, **v}), spec, true_s._replace(viscosity=mu))
+        return {c: getattr(out, c) for c in OUT_COLUMN}
+
+    mu0 = jnp.asarray(true_s.viscosity)
+    J = jax.jacfwd(f, argnums=0)(values, mu0)
+    _, g = jax.jvp(lambda m: f(values, m), (mu0,), (jnp.ones_like(mu0),))
+    ve = data.viscosity_error
+    r_of = data.run_of_sample
+    u = (np.asarray(true_s.time) - ve.center[r_of]) / ve.half_span[r_of]
+    degree = data.runs["viscosity_degree"].to_numpy()
+    basis = np.polynomial.chebyshev.chebvander(u, VISCOSITY_MODES - 1)
+    runs = np.flatnonzero(smoothed)
+    cols = [(r, k) for r in runs for k in range(int(degree[r]) + 1)]
+    p, q = len(names), len(cols)
+    I_bc, I_cc = np.zeros((p, q)), np.zeros((q, q))
+    col_of = {rk: i for i, rk in enumerate(cols)}
+    sig_mu2 = np.zeros(data.n_running)
+    for pr in np.unique(proc):
+        sel = proc == pr
+        sig_mu2[sel] = _var(sensors[pr]["viscosity_Pa_s"], tf["viscosity_Pa_s"].to_numpy()[sel])
+    for r in runs:
+        sel = np.flatnonzero(r_of == r)
+        d = int(degree[r]) + 1
+        X = basis[sel, :d]
+        idx = [col_of[(r, k)] for k in range(d)]
+        block = X.T @ (X / sig_mu2[sel, None])  # the viscometer's readings
+        for c in OUT_COLUMN:
+            m = data.measured[c][sel]
+            w = np.where(np.isfinite(m), 1.0 / np.asarray(sigma[c])[sel] ** 2, 0.0)
+            gc = np.asarray(g[c])[sel]
+            GX = X * gc[:, None]
+            Jc = np.stack([np.asarray(J[c][k])[sel] for k in names], axis=1)
+            I_bc[:, idx] += Jc.T @ (GX * w[:, None])
+            block += GX.T @ (GX * w[:, None])
+        I_cc[np.ix_(idx, idx)] = block
+    schur = info - I_bc @ np.linalg.solve(I_cc, I_bc.T)
+    schur = 0.5 * (schur + schur.T)
+    return design.cramer_rao(schur, names)[0], schur
 
 
 def unresolved_acceleration(camp, data):
@@ -139,49 +215,6 @@ def unresolved_acceleration(camp, data):
         err = tf["acceleration_rad_s2"].to_numpy()[rows] - est
         out[sel] = np.mean(err[pos] ** 2)
     return out
-
-
-def shaft_resolved_acceleration(camp, data):
-    """The extraction's acceleration with the shaft-locked speed ripple resolved
-    in shaft angle (a prototype of a change to ``extract``, for the diagnosis):
-    per run, speed = quadratic in time + b cos θ + c sin θ by least squares;
-    the time derivative is taken of speed less the once-per-revolution part,
-    whose own derivative, ω·(−b sin θ + c cos θ), is added back exactly.  The
-    aliased once-per-revolution acceleration then no longer enters the torque."""
-    from motorid.identify.extract import smoothed_acceleration
-
-    t = camp.frame["time_s"].to_numpy()[data.frame_index]
-    th = np.asarray(data.running.theta)
-    w = np.asarray(data.running.speed)
-    acc = np.array(data.running.acceleration, dtype=float)
-    for r in np.unique(data.run_of_sample):
-        sel = np.flatnonzero(data.run_of_sample == r)
-        if sel.size < 10:
-            continue
-        tt = t[sel] - t[sel].mean()
-        X = np.c_[np.ones(sel.size), tt, tt**2, np.cos(th[sel]), np.sin(th[sel])]
-        c, *_ = np.linalg.lstsq(X, w[sel], rcond=None)
-        acc[sel] = (smoothed_acceleration(t[sel], w[sel] - X[:, 3:] @ c[3:])
-                    + w[sel] * (-c[3] * np.sin(th[sel]) + c[4] * np.cos(th[sel])))
-    return acc
-
-
-def smoothed_viscosity(camp, data):
-    """The viscometer's reading smoothed per run (a quadratic in time, by least
-    squares): viscosity follows the oil temperature, which drifts slowly within
-    a steady run, so the run's fit keeps the drift and drops the reading noise
-    (a prototype of a change to ``extract``, for the diagnosis)."""
-    t = camp.frame["time_s"].to_numpy()[data.frame_index]
-    mu = np.array(data.running.viscosity, dtype=float)
-    for r in np.unique(data.run_of_sample):
-        sel = np.flatnonzero(data.run_of_sample == r)
-        if sel.size < 5:
-            continue
-        tt = t[sel] - t[sel].mean()
-        X = np.c_[np.ones(sel.size), tt, tt**2]
-        c, *_ = np.linalg.lstsq(X, mu[sel], rcond=None)
-        mu[sel] = X @ c
-    return mu
 
 
 def mirror_pairs(data):
@@ -210,7 +243,7 @@ def replicate(seed, spec, truth, prots, keep_dataset=False, diagnose=False):
 
     from motorid import model
     from motorid.bench.simulate import simulate_campaign
-    from motorid.identify.extract import extract
+    from motorid.identify.extract import ExtractSettings, extract
     from motorid.identify.least_squares import fit_least_squares
     from motorid.identify.results import interval_dof
 
@@ -224,14 +257,16 @@ def replicate(seed, spec, truth, prots, keep_dataset=False, diagnose=False):
            "brk_design": dict(zip(data.event_runs, zip(np.asarray(data.events.p_a + data.events.p_b).tolist(),
                                                        np.asarray(data.events.direction).tolist())))}
     if diagnose:
-        # the same logs refitted (1) with the viscometer's noise removed (true viscosity
-        # as the input), (2) with the acceleration resolved in shaft angle
+        # the same logs (1) fitted with the true viscosity as the input (no viscometer error at
+        # all), (2) extracted with the viscometer's readings used as read (no smoothing), (3)
+        # extracted with only the first shaft order of the speed ripple resolved
         tf = camp.true_frame.iloc[data.frame_index]
-        d1 = dataclasses.replace(data, running=data.running._replace(viscosity=tf["viscosity_Pa_s"].to_numpy()))
-        d2 = dataclasses.replace(data, running=data.running._replace(acceleration=shaft_resolved_acceleration(camp, data)))
-        d3 = dataclasses.replace(data, running=data.running._replace(viscosity=smoothed_viscosity(camp, data)))
+        d1 = dataclasses.replace(data, running=data.running._replace(viscosity=tf["viscosity_Pa_s"].to_numpy()),
+                                 viscosity_error=None)
+        d2 = extract(camp.frame, spec, ExtractSettings(smooth_viscosity=False))
+        d3 = extract(camp.frame, spec, ExtractSettings(shaft_orders=(1,)))
         out["diag"] = {}
-        for key, d in (("true_viscosity", d1), ("shaft_acceleration", d2), ("smoothed_viscosity", d3)):
+        for key, d in (("true_viscosity", d1), ("viscosity_as_read", d2), ("shaft_order_1", d3)):
             f = fit_least_squares(d, spec)
             out["diag"][key] = ({k: f.values[k] for k in ls.free}, {k: f.std[k] for k in ls.free})
     if keep_dataset:
@@ -289,12 +324,13 @@ def efficiency(quick: bool, budget_s: float):
     measured = dict(data0.measured, breakaway=data0.held_torque)
     info = design.fisher_information(truth_p, spec, None, sigma, names=names, running=true_s, events=data0.events,
                                      measured=measured)
-    crb, _ = design.cramer_rao(info, names)
+    crb, _ = viscosity_nuisance_bound(spec, truth_p, names, prots, first["camp"], data0, sigma, true_s, info)
     # the same bound with the sensors' noise alone (no unresolved acceleration), for the record
     sig0, _ = noise_model_sigma(spec, truth_p, prots, first["camp"], first["data"], unresolved=False)
     sig0["breakaway"] = sigma["breakaway"]
-    crb0, _ = design.cramer_rao(design.fisher_information(truth_p, spec, None, sig0, names=names, running=true_s,
-                                                          events=data0.events, measured=measured), names)
+    info0 = design.fisher_information(truth_p, spec, None, sig0, names=names, running=true_s, events=data0.events,
+                                      measured=measured)
+    crb0, _ = viscosity_nuisance_bound(spec, truth_p, names, prots, first["camp"], data0, sig0, true_s, info0)
     vals = np.array([[r["values"][k] for k in names] for r in reps])
     stds = np.array([[r["std"][k] for k in names] for r in reps])
     tv = np.array([truth_p[k] for k in names])
@@ -326,7 +362,7 @@ def efficiency(quick: bool, budget_s: float):
     # diagnosis: the first replications refitted with true viscosity / shaft-resolved acceleration
     diag = {}
     dreps = [r for r in reps if "diag" in r]
-    for key in ("true_viscosity", "shaft_acceleration", "smoothed_viscosity"):
+    for key in ("true_viscosity", "viscosity_as_read", "shaft_order_1"):
         if not dreps:
             break
         dv = np.array([[r["diag"][key][0][k] for k in names] for r in dreps])
@@ -475,9 +511,14 @@ def run(quick: bool = False) -> str:
         "points (rows of the simulator's `true_frame`), I = Σ J Jᵀ/σ² with J from JAX (forward mode through "
         "`model.predict` / `model.predict_breakaway`).  The σ of each running sample is the sensors' noise "
         "model at the true reading, σ² = noise² + (relative_noise·|x|)² + resolution²/12, plus the noise of the "
-        "measured inputs the fit conditions on (port and case pressures, speed, viscosity, and the acceleration "
+        "measured inputs the fit conditions on (port and case pressures, speed, and the acceleration "
         "the extraction derives from the noisy speed), carried through the model's derivatives (shaft-angle "
-        "quantization, 0.01°, is left out).  The acceleration's error also holds the part of the true "
+        "quantization, 0.01°, is left out).  The viscosity is a nuisance: where the extraction smooths a run's "
+        "viscometer readings (every running run here), the bound's model has the run's true viscosity a "
+        "Chebyshev polynomial in time of the degree the extraction chose, read by the viscometer with its noise "
+        "model and seen by the running channels through the model; the bound is the inverse of the Schur "
+        "complement of the joint Fisher information of (parameters, polynomial coefficients) "
+        "(`viscosity_nuisance_bound`).  The acceleration's error also holds the part of the true "
         "acceleration that a 9-point derivative of even noise-free speed cannot follow: the dynamometer's "
         "once-per-revolution speed ripple, aliased at 2500 rpm and 50 Hz, puts J·α ≈ 0.25 N·m rms into the "
         "torque of the fastest runs, 2-3 times the torque sensor's noise; its phase is random from run to run, "
@@ -522,38 +563,34 @@ def run(quick: bool = False) -> str:
         f"and ±{eff['se95']:.1f} (95 %).",
         "",
     ]
-    # diagnosis of K_v and K_L0 on the first replications
+    # diagnosis of K_v and the leakage coefficients on the first replications
     dg = eff["diag"]
     if dg:
-        tv_, sa = dg["true_viscosity"], dg["shaft_acceleration"]
         L += [
-            f"### Diagnosis: what sets K_v's and K_L0's errors ({eff['n_diag']} of the replications refitted)",
+            f"### Diagnosis: the viscosity and the acceleration ({eff['n_diag']} of the replications refitted)",
             "",
-            "The same logs fitted again (1) with the true viscosity as the input in place of the viscometer's "
-            "reading (0.3 % relative noise), (1b) with the reading smoothed per run (`smoothed_viscosity`: a "
-            "quadratic in time fitted to the run's readings, a prototype of a change to `extract`), (2) with the acceleration taken from speed with its once-per-revolution "
-            "part resolved in shaft angle (`shaft_resolved_acceleration` in this benchmark, a prototype of a change "
-            "to `extract`: per run, speed = quadratic in time + b cos θ + c sin θ; the time derivative is taken of "
-            "speed less the once-per-revolution part, whose derivative ω(−b sin θ + c cos θ) is added back).",
+            "The same logs fitted again (1) with the true viscosity as the input (no viscometer error at all), "
+            "(2) extracted with `ExtractSettings(smooth_viscosity=False)`: the viscometer's readings (0.3 % "
+            "relative noise) used as read, as before the extraction smoothed them, (3) extracted with "
+            "`ExtractSettings(shaft_orders=(1,))`: only the first shaft order of the speed ripple resolved in θ.",
             "",
             "| parameter | fit | mean bias | empirical std | mean LS std | empirical/LS |",
             "|---|---|---|---|---|---|",
         ]
+        labels = (("true_viscosity", "true viscosity"), ("viscosity_as_read", "viscosity as read"),
+                  ("shaft_order_1", "shaft order 1 only"))
         for k in ("Kv", "KL0", "KL_a1", "KL_b1", "KAB"):
-            if k not in tv_:
+            if k not in dg["true_viscosity"]:
                 continue
-            b = tv_[k]
-            L.append(f"| {k} | as fitted | {_fmt(b['base_bias'], 2)} | {_fmt(b['base_emp'], 3)} | "
-                     f"{_fmt(b['base_ls'], 3)} | {b['base_emp'] / b['base_ls']:.2f} |")
-            L.append(f"| {k} | true viscosity | {_fmt(b['bias'], 2)} | {_fmt(b['emp'], 3)} | {_fmt(b['ls'], 3)} | "
-                     f"{b['emp'] / b['ls']:.2f} |")
-            c = dg["smoothed_viscosity"][k]
-            L.append(f"| {k} | viscosity smoothed per run | {_fmt(c['bias'], 2)} | {_fmt(c['emp'], 3)} | "
-                     f"{_fmt(c['ls'], 3)} | {c['emp'] / c['ls']:.2f} |")
-            if k == "Kv":
-                c = sa[k]
-                L.append(f"| {k} | shaft-resolved acceleration | {_fmt(c['bias'], 2)} | {_fmt(c['emp'], 3)} | "
-                         f"{_fmt(c['ls'], 3)} | {c['emp'] / c['ls']:.2f} |")
+            b0 = dg["true_viscosity"][k]
+            L.append(f"| {k} | as fitted | {_fmt(b0['base_bias'], 2)} | {_fmt(b0['base_emp'], 3)} | "
+                     f"{_fmt(b0['base_ls'], 3)} | {b0['base_emp'] / b0['base_ls']:.2f} |")
+            for key, label in labels:
+                if (key == "shaft_order_1") != (k == "Kv"):
+                    continue
+                c = dg[key][k]
+                L.append(f"| {k} | {label} | {_fmt(c['bias'], 2)} | {_fmt(c['emp'], 3)} | {_fmt(c['ls'], 3)} | "
+                         f"{c['emp'] / c['ls']:.2f} |")
         L.append("")
     L += [
         "### Simulation-based calibration of the posterior (emcee)",
@@ -636,9 +673,9 @@ def run(quick: bool = False) -> str:
                      + ("below" if mean > 0.5 else "above") + " the truth more often than not")
         shapes.append(f"{k} (p = {p:.3f}), {what}")
     bias_of = dict(zip(eff["names"], eff["bias_crb"]))
-    kv_d = dg.get("shaft_acceleration", {}).get("Kv") if dg else None
-    kl_d = dg.get("true_viscosity", {}).get("KL0") if dg else None
-    kl_s = dg.get("smoothed_viscosity", {}).get("KL0") if dg else None
+    kv_d = dg.get("shaft_order_1", {}).get("Kv") if dg else None
+    raw = dg.get("viscosity_as_read", {}) if dg else {}
+    tru = dg.get("true_viscosity", {}) if dg else {}
     L += [
         "**Reading the results.**",
         "",
@@ -646,35 +683,31 @@ def run(quick: bool = False) -> str:
         + (f"  Ratios wholly below 1 ({', '.join(below)}) do not beat a true bound: they show that the noise "
            "model used for the bound is conservative for them." if below else ""),
         "- K_v: the fast runs' speed carries the dynamometer's once-per-revolution ripple, aliased at 2500 rpm "
-        "and 50 Hz; a plain derivative of the sampled speed turned it into a false J·α of 0.25 N·m rms in their "
-        "torque (2-3 times the torque sensor's noise), which inflated the fit's per-run σ and with it K_v's "
-        "standard error (over-coverage, a hump in the posterior's ranks: the previous run of this study).  The "
-        "extraction now resolves a shaft-locked speed ripple in θ (`extract.running_acceleration`: shaft orders "
-        "1 and 2 fitted per steady run and differentiated through θ, the rest by the 9-point derivative); the "
-        "bound's column 6 adds what that estimate still misses on noise-free speed, column 7 leaves it out"
-        + (f"; on top of it the order-1 prototype of the diagnosis table moves K_v's spread "
-           f"{kv_d['base_emp']:.2f} → {kv_d['emp']:.2f} and its standard error {kv_d['base_ls']:.2f} → "
-           f"{kv_d['ls']:.2f}" if kv_d else "") + ".",
-        f"- K_L0 and the K_L harmonics: K_L0's bias ({bias_of.get('KL0', float('nan')):+.2f} bound-widths) is "
-        "errors-in-variables attenuation: the leakage flows go as 1/μ and the fit conditions on the viscometer's "
-        "noisy reading (0.3 % relative), so E[K̂_L0]/K_L0 ≈ 1 − 2σ_rel² ≈ 1 − 1.8·10⁻⁵, about half a "
-        "bound-width (1.7·10⁻¹⁸ of 5·10⁻¹⁴ is 3.4·10⁻⁵) for a fit on the case flow alone; the port flows, which "
-        "carry K_L0 too, dilute it.  "
-        + (f"Diagnosis table: K_L0's bias {kl_d['base_bias']:.2g} as fitted, {kl_d['bias']:.2g} with the true "
-           f"viscosity, {kl_s['bias']:.2g} with the reading smoothed per run (±{kl_d['base_emp'] / math.sqrt(eff['n_diag']):.1g} "
-           f"at {eff['n_diag']} replications): smoothing removes the bias.  It does not remove K_L0's spread "
-           f"({kl_d['base_emp']:.3g} as fitted, {kl_d['emp']:.3g} with the true viscosity, {kl_s['emp']:.3g} "
-           f"smoothed), and the fit's standard error then no longer counts it (empirical/LS {kl_s['emp'] / kl_s['ls']:.2f}): "
-           "what is left of the viscosity's error after smoothing is common to a run, not white.  For the "
-           "harmonics the smoothing helps outright: "
-           + ", ".join(f"{k} {dg['true_viscosity'][k]['base_emp']:.3g} → {dg['smoothed_viscosity'][k]['emp']:.3g} "
-                       f"(empirical/LS {dg['smoothed_viscosity'][k]['emp'] / dg['smoothed_viscosity'][k]['ls']:.2f})"
-                       for k in ("KL_a1", "KL_b1") if k in dg["smoothed_viscosity"])
-           + ": the viscometer's noise multiplies the case flow sample by sample, and that is what puts K_L_b1's "
-           "ratio above 1.1.  " if kl_d and kl_s else "")
-        + "Proposed for `extract`: smooth the viscosity per run (it follows the oil temperature, which drifts "
-        "slowly), and carry the smoothed viscosity's run-level error into the leakage channels (the fit's "
-        "weights, and the bound's input noise).  The skew of K_L0's posterior ranks is the same bias.",
+        "and 50 Hz; a plain derivative of the sampled speed turns it into a false J·α of 0.25 N·m rms in their "
+        "torque (2-3 times the torque sensor's noise).  The extraction resolves a shaft-locked speed ripple in θ "
+        "(`extract.running_acceleration`: shaft orders 1 and 2, each kept only where significant, fitted per "
+        "steady run and differentiated through θ, the rest by the 9-point derivative); the bound's column 6 adds "
+        "what that estimate still misses on noise-free speed, column 7 leaves it out"
+        + (f"; resolving order 1 alone gives K_v's spread {kv_d['base_emp']:.2f} → {kv_d['emp']:.2f} and "
+           f"standard error {kv_d['base_ls']:.2f} → {kv_d['ls']:.2f} (diagnosis table)" if kv_d else "") + ".",
+        "- The viscosity and the leakage coefficients: the leakage flows go as 1/μ, and a viscometer's noise "
+        "(0.3 % per reading here) multiplies them sample by sample.  Used as read, it biases K_L0 low "
+        "(errors in variables, E[K̂_L0]/K_L0 ≈ 1 − 2σ_rel²) and scatters the K_L(θ) harmonics beyond their "
+        "bound.  The extraction now replaces each steady run's readings by a Chebyshev curve in time "
+        "(`extract.smooth_viscosity`; degree by a residual-variance test, kept only where the rest is white), "
+        "and the fit carries the curve's run-level error, common to the run's samples, into the covariance "
+        "(`FitResult.covariance_viscosity`, the two-step plug-in term) and the posterior (each draw convolved "
+        "with it)."
+        + ("  Diagnosis table, as fitted against readings used as read: "
+           + "; ".join(f"{k} spread {tru[k]['base_emp']:.3g} vs {raw[k]['emp']:.3g}, bias {tru[k]['base_bias']:.2g} "
+                       f"vs {raw[k]['bias']:.2g}, empirical/LS {tru[k]['base_emp'] / tru[k]['base_ls']:.2f} vs "
+                       f"{raw[k]['emp'] / raw[k]['ls']:.2f}"
+                       for k in ("KL0", "KL_a1", "KL_b1", "KAB") if k in raw and k in tru)
+           + f" (±{100 / math.sqrt(2 * max(eff['n_diag'] - 1, 1)):.0f} % on a spread from {eff['n_diag']} "
+           "replications).  With the true viscosity: "
+           + ", ".join(f"{k} {tru[k]['emp']:.3g}" for k in ("KL0", "KL_a1", "KL_b1", "KAB") if k in tru)
+           + ": what is left above that is the run-level error of the curves, which no estimator that learns "
+           "the viscosity from the viscometer can avoid, and which the bound counts." if raw and tru else ""),
         f"- Least-squares intervals: pooled coverage {eff['pooled68']:.1f} % / {eff['pooled95']:.1f} % is "
         + ("within" if met_pool else "outside") + " 3 points of nominal."
         + (f"  Over-covering by more than two binomial standard errors: {', '.join(over)}." if over else "")
