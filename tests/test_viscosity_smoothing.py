@@ -105,9 +105,40 @@ def test_fit_carries_the_viscosity_error_as_a_refit_would_show_it():
     from motorid.identify.least_squares import _backend
 
     JtJ = _backend(problem, base.values, free, FitOptions()).normal(base.values)[0]
-    V1 = viscosity_covariance(problem, base.values, _covariance(JtJ))
+    V1 = viscosity_covariance(problem, base.values, _covariance(JtJ))[0]
     # (the parameters this mode moves most; a move 30× smaller, such as K_L_a1's here, also
     # feels the refit's exact Hessian, which differs from Gauss-Newton's JᵀJ by Σ r ∂²r)
     for k in ("KL0", "KL_b1", "KAB"):
         j = free.index(k)
         assert abs(d_refit[j]) == pytest.approx(np.sqrt(V1[j, j]), rel=0.02), k
+
+
+@pytest.mark.parametrize("name", ["clean_9_seed101", "clean_9_seed103"])
+def test_run_means_are_judged_with_the_viscosity_error_they_share(name):
+    """The discrepancy search tests each run's mean residual against its noise.
+    With the viscosity smoothed, the case flow's per-sample noise shrinks but the
+    run's mean still moves with its curve's error; counted in (the fit's
+    viscosity_run_variance), the runs' z-scores have unit variance on clean logs."""
+    from conftest import REPO
+    from motorid.discrepancy.locate import _run_table
+    from motorid.identify.pipeline import load_campaign
+    from motorid.spec import load_motor_spec
+
+    root = REPO / "synthetic_data" / "concealed" / name
+    spec = load_motor_spec(root / "motor.toml")
+    _, ds = load_campaign([root / "campaign.csv.gz"], spec)
+    ls = fit_least_squares(ds, spec)
+    n = len(ds.runs)
+    ok = ls.inliers["q_case"]
+    z = np.where(ok, ls.residuals["q_case"] / ls.sigma["q_case"], np.nan)
+    noise = np.array([np.median(ls.sigma["q_case"][(ds.run_of_sample == r) & ok])
+                      if np.any((ds.run_of_sample == r) & ok) else np.nan for r in range(n)])
+    shared = ls.viscosity_run_variance["q_case"] / noise**2
+    mean, se_alone = _run_table(z, ds.run_of_sample, n)
+    _, se = _run_table(z, ds.run_of_sample, n, shared)
+    have = np.isfinite(mean)
+    assert have.sum() >= 40
+    # the shared error is a real part of a run mean's uncertainty ...
+    assert np.median(se[have] ** 2 / se_alone[have] ** 2) > 1.3
+    # ... and with it the z-scores of clean logs are standard normal
+    assert 0.65 < np.var(mean[have] / se[have]) < 1.35

@@ -91,8 +91,10 @@ def _lag1(z: np.ndarray) -> float:
     return float(np.clip(np.sum(a * b) / den, 0.0, 0.95)) if den > 0 else 0.0
 
 
-def _run_table(z, run_of, n_runs):
-    """Per run: mean normalized residual and its standard error (AR(1) corrected)."""
+def _run_table(z, run_of, n_runs, shared_var=None):
+    """Per run: mean normalized residual and its standard error (AR(1) corrected;
+    plus ``shared_var`` per run, an error common to the run's samples in units of
+    its noise level squared, such as that of its smoothed viscosity)."""
     mean = np.full(n_runs, np.nan)
     se = np.full(n_runs, np.nan)
     for r in range(n_runs):
@@ -104,6 +106,8 @@ def _run_table(z, run_of, n_runs):
         n_eff = v.size * (1 - rho) / (1 + rho)
         mean[r] = v.mean()
         se[r] = max(np.std(v), 1.0) / np.sqrt(max(n_eff, 1.0))
+        if shared_var is not None and np.isfinite(shared_var[r]):
+            se[r] = np.sqrt(se[r] ** 2 + shared_var[r])
     return mean, se
 
 
@@ -213,8 +217,6 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
         if ok.sum() < 20:
             continue
         z = np.where(ok, res / sig, np.nan)
-        mean_z, se_z = _run_table(z, run_of, n_runs)
-        zrun = mean_z / se_z
         mean_res = np.full(n_runs, np.nan)
         noise_run = np.full(n_runs, np.nan)
         for r in range(n_runs):
@@ -222,6 +224,14 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
             if sel.sum():
                 mean_res[r] = res[sel].mean()
                 noise_run[r] = np.median(sig[sel])
+        # the smoothed viscosity's error is common to a run: it moves the run's mean residual
+        visc = getattr(ls, "viscosity_run_variance", {}).get(c)
+        shared = None
+        if visc is not None and len(visc) == n_runs:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                shared = np.asarray(visc) / noise_run**2
+        mean_z, se_z = _run_table(z, run_of, n_runs, shared)
+        zrun = mean_z / se_z
         have = np.isfinite(zrun)
         if have.sum() >= 2:
             for var, labels in list(per_run.items()) + [("run", _Labels(runs["run"].to_numpy(), runs["run"].tolist()))]:

@@ -84,6 +84,8 @@ class FitResult:
     # the share of `covariance` that the smoothed viscosity's run-level error carries
     # (over `free`; None where every viscosity reading was used as read)
     covariance_viscosity: np.ndarray | None = None
+    # channel -> per run, the variance the same error adds to the run's mean residual [SI²]
+    viscosity_run_variance: dict = field(default_factory=dict)
 
     @property
     def reduced_chi2(self) -> float:
@@ -667,7 +669,8 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     chi2 = float(sum(np.sum((residuals[c][inliers[c]] / sig[c][inliers[c]]) ** 2) for c in obs))
     dof = max(sum(used.values()) - len(free), 1)
     cov = _covariance(JtJ) if free else np.zeros((0, 0))
-    cov_visc = viscosity_covariance(problem, values, cov) if (free and opt.viscosity_error) else None
+    cov_visc, visc_run_var = (viscosity_covariance(problem, values, cov) if (free and opt.viscosity_error)
+                              else (None, {}))
     if chi2 / dof > 1.0:
         cov = cov * (chi2 / dof)  # noise underestimated: widen, never narrow
     if cov_visc is not None:
@@ -709,7 +712,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         outliers={c: int(np.sum(np.isfinite(obs[c]) & ~inliers[c])) for c in obs},
         used=used, chi2=chi2, dof=dof, steps=steps_total, converged=bool(converged), warnings=warnings,
         residuals=residuals, sigma=sig, inliers=inliers, params_all=all_params, mechanisms=tuple(mechanisms), problem=problem,
-        covariance_viscosity=cov_visc,
+        covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var,
     )
 
 
@@ -728,8 +731,9 @@ def _viscosity_sensitivity(values: dict, ctx: _Ctx):
     return J, jax.jvp(of_viscosity, (mu,), (jnp.ones_like(mu),))[1]
 
 
-def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray) -> np.ndarray | None:
-    """Parameter covariance from the smoothed viscosity's run-level error [SI²].
+def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray):
+    """What the smoothed viscosity's run-level error does to the fit →
+    (parameter covariance [SI²], channel → variance of each run's mean residual [SI²]).
 
     The extraction replaces each run's viscometer readings by a curve in time
     (:func:`motorid.identify.extract.smooth_viscosity`); the curve's error δμ_r =
@@ -737,37 +741,52 @@ def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray) -> np
     it does not show in the residual scatter the noise levels come from.  To
     first order it moves the estimate by dβ/dz = (JᵀJ)⁻¹ Jᵀ (∂r/∂μ · modes) (J
     and r weighted; a two-step estimator's plug-in correction, Murphy & Topel
-    1985), and adds Σ_run,k (dβ/dzₖ)(dβ/dzₖ)ᵀ to the covariance.  ``cov`` is
-    (JᵀJ)⁻¹ over ``problem.free``.  None where no run's viscosity was smoothed.
+    1985), and adds Σ_run,k (dβ/dzₖ)(dβ/dzₖ)ᵀ to the covariance.  It also moves
+    each run's mean residual by the run mean of ∂prediction/∂μ · modes, which a
+    test of run means against the noise (:mod:`motorid.discrepancy.locate`) must
+    count.  ``cov`` is (JᵀJ)⁻¹ over ``problem.free``.  (None, {}) where no run's
+    viscosity was smoothed.
     """
     verr = getattr(problem.data, "viscosity_error", None)
     if verr is None or not verr.any or not problem.has_running or problem.cells is None:
-        return None
+        return None, {}
     modes = verr.modes(problem.run_of, np.asarray(problem.data.running.time))
-    n_cells = problem.n_cells
+    n_cells, K = problem.n_cells, modes.shape[1]
     counts = np.maximum(np.bincount(problem.cell_of, minlength=n_cells), 1)
     cell_modes = np.stack([np.bincount(problem.cell_of, weights=modes[:, k], minlength=n_cells)
-                           for k in range(modes.shape[1])], axis=1) / counts[:, None]
+                           for k in range(K)], axis=1) / counts[:, None]
     ctx = problem.ctx()
     J, g = (np.asarray(a) for a in _viscosity_sensitivity(_as_jnp(values), ctx))
-    n_runs = int(problem.cell_run.max()) + 1
-    B = np.zeros((n_runs, modes.shape[1], J.shape[1]))  # Jᵀ ∂r/∂z per run and mode
+    n_runs = max(len(problem.data.runs), int(problem.cell_run.max()) + 1)  # aligned with Dataset.runs
+    B = np.zeros((n_runs, K, J.shape[1]))  # Jᵀ ∂r/∂z per run and mode
+    run_var = {}
     start = 0
     for c in CHANNELS:
         if c not in ctx.observed:
             continue
         size = int(np.asarray(ctx.observed[c]).size)
         if c in RUNNING_CHANNELS:
-            Jg = J[start:start + n_cells] * g[start:start + n_cells, None]  # (cells, free)
-            for k in range(modes.shape[1]):
+            gc = g[start:start + n_cells]
+            Jg = J[start:start + n_cells] * gc[:, None]  # (cells, free)
+            w = np.asarray(ctx.weights[c])[:n_cells]
+            n_in = (w > 0) * w**2  # inlier count / σ_run²: the cell's weight in its run's mean
+            with np.errstate(invalid="ignore", divide="ignore"):
+                slope = np.where(w > 0, gc / w, 0.0)  # −∂prediction/∂μ (unweighted)
+            tot = np.bincount(problem.cell_run, weights=n_in, minlength=n_runs)
+            shift = np.zeros((n_runs, K))
+            for k in range(K):
                 if np.any(cell_modes[:, k]):
                     for j in range(J.shape[1]):
                         B[:, k, j] += np.bincount(problem.cell_run, weights=Jg[:, j] * cell_modes[:, k],
                                                   minlength=n_runs)
+                    shift[:, k] = np.bincount(problem.cell_run, weights=n_in * slope * cell_modes[:, k],
+                                              minlength=n_runs)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                run_var[c] = np.where(tot > 0, np.sum(shift**2, axis=1) / np.maximum(tot, 1e-300) ** 2, 0.0)
         start += size
     A = B.reshape(-1, J.shape[1]) @ cov  # dβ/dz, one row per (run, mode)
     out = A.T @ A
-    return 0.5 * (out + out.T)
+    return 0.5 * (out + out.T), run_var
 
 
 def _scales(values: dict, free: list, mechanisms) -> np.ndarray:
