@@ -492,13 +492,14 @@ def _rest_level(t, w, line: bool, floor: float):
     return (lambda tt: np.polyval(coef, tt - t_ref)), max(sigma, trimmed, 0.5 * quantum, floor)
 
 
-def _hinge_costs(tt, yy, t0):
+def _hinge_costs(tt, yy, t0, quadratic: bool = True):
     """Least-squares cost of yy ≈ a·u + b·u², u = max(tt − t0, 0), a, b ≥ 0, for each t0.
 
     The two-column non-negative least squares in closed form, vectorized over
     ``t0``: the unconstrained solution where both coefficients come out ≥ 0,
     else the better of the one-column fits (the problem is convex, so the best
-    feasible candidate is the optimum).
+    feasible candidate is the optimum).  ``quadratic=False``: the linear hinge
+    yy ≈ a·u alone (b = 0).
     """
     u = np.clip(tt[None, :] - np.asarray(t0, dtype=float)[:, None], 0.0, None)
     v = u * u
@@ -512,12 +513,14 @@ def _hinge_costs(tt, yy, t0):
         b1 = np.where(vv > 0, np.maximum(vy / vv, 0.0), 0.0)
     both = yy2 - (a2 * uy + b2 * vy)  # at the unconstrained optimum, SSE = yy − cᵀ(Xᵀy)
     only_a = yy2 - 2 * a1 * uy + a1 * a1 * uu
+    if not quadratic:
+        return np.maximum(only_a, 0.0)
     only_b = yy2 - 2 * b1 * vy + b1 * b1 * vv
     feasible = (a2 >= 0) & (b2 >= 0)
     return np.maximum(np.minimum(np.where(feasible, both, np.inf), np.minimum(only_a, only_b)), 0.0)
 
 
-def _hinge_onset(t, dev, lo: int, last_rest: int, hi: int) -> float:
+def _hinge_onset(t, dev, lo: int, last_rest: int, hi: int, noise: float = 0.0) -> float:
     """Onset t0 by fitting dev = a·u + b·u², u = max(t − t0, 0), a, b ≥ 0, over samples lo..hi.
 
     Rest before t0; after it, growth from zero at a rate that does not fall (the
@@ -525,21 +528,103 @@ def _hinge_onset(t, dev, lo: int, last_rest: int, hi: int) -> float:
     one, quadratic when they are equal.  t0 is searched on a grid between
     sample ``lo`` and the first moving sample, then refined twice on finer grids
     around the best point (resolution 1/128 000 of that span).
+
+    The linear hinge (b = 0) is fitted first; the quadratic term is taken only
+    where it lowers the cost significantly (by more than a χ²₁ of p = 0.001 in
+    units of the noise variance: ``noise``, the fit's own residual or 1e-4 of
+    the largest deviation, whichever is largest) and three growth samples or
+    more determine it.  With few growth samples the full model is not determined: two
+    samples after the onset are fitted exactly by a line from any of a range of
+    t0 with a matching b, and the grid would pick one of those at random.
     """
     tt, yy = t[lo:hi + 1], dev[lo:hi + 1]
     a, b = t[lo], t[last_rest + 1]
-    grid = np.linspace(a, b, 81)
-    best = float(grid[int(np.argmin(_hinge_costs(tt, yy, grid)))])
-    step = (b - a) / 80
-    for _ in range(2):
-        grid = np.linspace(max(best - step, a), min(best + step, b), 81)
-        costs = _hinge_costs(tt, yy, grid)
-        best = float(grid[int(np.argmin(costs))])
-        step = (grid[-1] - grid[0]) / 80
-    return best
+
+    def search(quadratic: bool):
+        grid = np.linspace(a, b, 81)
+        costs = _hinge_costs(tt, yy, grid, quadratic)
+        k = int(np.argmin(costs))
+        best, cost = float(grid[k]), float(costs[k])
+        step = (b - a) / 80
+        for _ in range(2):
+            grid = np.linspace(max(best - step, a), min(best + step, b), 81)
+            costs = _hinge_costs(tt, yy, grid, quadratic)
+            k = int(np.argmin(costs))
+            best, cost = float(grid[k]), float(costs[k])
+            step = (grid[-1] - grid[0]) / 80
+        return best, cost
+
+    t_lin, c_lin = search(False)
+    dof = tt.size - 3
+    if dof < 1 or hi - last_rest < 3:  # b needs a third growth sample to be determined at all
+        return t_lin
+    t_quad, c_quad = search(True)
+    # (the floor: the grid's own resolution and rounding leave a relative misfit of about 1e-5)
+    var = max(noise * noise, c_quad / dof, (1e-4 * float(np.max(np.abs(yy)))) ** 2, 1e-300)
+    return t_quad if c_lin - c_quad > 10.83 * var else t_lin
 
 
-def find_breakaway(time, speed, rest_speed: float = 2e-3) -> Breakaway:
+def _angle_onset(t, theta, dev, direction: float, last_rest: int, limit) -> float | None:
+    """Onset from the angle turned by the first moving samples, where the speed alone cannot place it.
+
+    The angle is the integral of the speed, so it carries the time since the
+    onset that one speed sample does not.  The speed grows linearly from t0
+    (static friction above kinetic: the acceleration jumps at breakaway), ω = a·u,
+    u = t − t0, up to a speed limit W (``limit`` = (threshold, W): a sample at or
+    above the threshold has met the limit W; None: none did), so
+    θ − θ_rest = a u²/2 until u_s = W/a, W (u − u_s/2) after.
+
+    - first moving sample below the limit (ω₁): with a = ω₁/u₁, the angles of that
+      sample and, where it met the limit, of the next one are fitted for u₁
+      (least squares on a fine grid; one angle alone gives u₁ = 2 Δθ₁/ω₁);
+    - first moving sample on the limit: Δθ₁ = W (u₁ − u_s/2) with 0 < u_s ≤ u₁,
+      so u₁ lies between Δθ₁/W and 2 Δθ₁/W, and the middle of that interval is taken.
+
+    u₁ is kept within the interval between the last rest sample and the first
+    moving one.  None where the angle gives nothing (no readings, no movement).
+    """
+    if theta is None:
+        return None
+    grow = last_rest + 1
+    t_lr, t1 = float(t[last_rest]), float(t[grow])
+    span = t1 - t_lr
+    rest = np.arange(max(0, last_rest - 9), last_rest + 1)
+    rest = rest[np.isfinite(theta[rest])]
+    if rest.size == 0 or not math.isfinite(theta[grow]) or not span > 0.0:
+        return None
+    ref = float(theta[rest[-1]])
+    level = ref + float(np.median(np.remainder(theta[rest] - ref + np.pi, 2 * np.pi) - np.pi))
+    turned = lambda k: direction * math.remainder(float(theta[k]) - level, 2 * math.pi)  # noqa: E731
+    w1 = float(dev[grow])
+    if not w1 > 0.0:
+        return None
+    threshold, limit = (math.inf, math.inf) if limit is None else limit
+    if w1 >= threshold:  # already on the limit at the first moving sample
+        d1 = turned(grow)
+        if not d1 > 0.0:
+            return None
+        lo, hi = min(d1 / limit, span), min(2.0 * d1 / limit, span)
+        return t1 - 0.5 * (lo + hi)
+    use = [grow]
+    if grow + 1 < t.size and dev[grow + 1] >= threshold and math.isfinite(theta[grow + 1]):
+        use.append(grow + 1)
+    if len(use) == 1:
+        return t1 - min(max(2.0 * turned(grow), 0.0) / w1, span)
+    obs = np.array([turned(k) for k in use])
+    lag = np.array([float(t[k]) - t1 for k in use])
+    u1 = np.linspace(0.0, span, 2001)[1:]
+    for _ in range(3):  # grid, then two finer grids around the best point
+        a = w1 / u1[:, None]
+        u = u1[:, None] + lag[None, :]
+        u_s = limit / a
+        pred = np.where(u <= u_s, 0.5 * a * u * u, limit * (u - 0.5 * u_s))
+        best = int(np.argmin(((pred - obs[None, :]) ** 2).sum(1)))
+        step = u1[1] - u1[0]
+        u1 = np.linspace(max(u1[best] - step, 1e-3 * step), min(u1[best] + step, span), 201)
+    return t1 - float(u1[100])
+
+
+def find_breakaway(time, speed, rest_speed: float = 2e-3, theta=None) -> Breakaway:
     """Find the instant a startability run's speed leaves rest.
 
     time [s], speed [rad/s] of one run (NaN speeds are skipped).  The rest level
@@ -549,7 +634,14 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3) -> Breakaway:
     marks motion; walking back gives the last sample within 3 σ of rest, and the
     onset is refined by fitting the initial growth of speed, zero before t0 and
     a(t − t0) + b(t − t0)² after, over the rest samples and the first growth
-    samples.  Raises :class:`NoBreakaway` with the reason when there is none.
+    samples (b only where the samples ask for it, :func:`_hinge_onset`).  Samples
+    that may have met a speed limit (within 2 % or 5 σ of the sustained peak, as a
+    dynamometer's limiter holds it) are left out of that fit.  Where fewer than two
+    growth samples remain (fast breakaway at a low sample rate), ``theta`` (shaft
+    angle [rad], optional) places the onset by the angle turned by the first moving
+    sample (:func:`_angle_onset`); without it the onset is the middle between the
+    last sample at rest and the first moving one.  Raises :class:`NoBreakaway` with
+    the reason when there is none.
     """
     t_all = np.asarray(time, dtype=float)
     w_all = np.asarray(speed, dtype=float)
@@ -573,7 +665,8 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3) -> Breakaway:
         lasting = up if direction > 0 else down
         dev = direction * r
         first_moving = min(first)
-        at_rest = np.flatnonzero(np.abs(r[:first_moving + 1]) <= max(3.0 * noise, 0.1 * moving))
+        # (one-sided: a reading against the direction of motion is noise, not motion)
+        at_rest = np.flatnonzero(dev[:first_moving + 1] <= max(3.0 * noise, 0.1 * moving))
         if first_moving < 3 or at_rest.size == 0:
             raise NoBreakaway("the shaft is already turning at the start of the run")
         last_rest = int(at_rest[-1])
@@ -591,11 +684,21 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3) -> Breakaway:
     if half.size:
         end = min(end, grow + int(half[0]))
     end = min(end, grow + 20000, n - 1)
-    if end - last_rest < 2:  # one sample of growth: the onset lies between it and the last at rest
-        onset = 0.5 * float(t[last_rest] + t[min(grow, n - 1)])
-    else:
+    # a speed limit clips the growth: samples near the sustained peak may have met it
+    limit = peak - max(0.02 * abs(peak), 5.0 * noise)
+    limited = np.flatnonzero(dev[grow:] >= limit)
+    limit = (float(limit), float(np.median(dev[grow + limited]))) if limited.size else None
+    if limited.size:
+        end = min(end, grow + int(limited[0]) - 1)
+    onset = None
+    if end - last_rest >= 2:
         lo = max(0, last_rest + 1 - max(5, end - last_rest))
-        onset = _hinge_onset(t, _median3(dev), lo, last_rest, end)
+        onset = _hinge_onset(t, _median3(dev), lo, last_rest, end, noise)
+    elif grow < n:  # fewer than two growth samples: the angle turned by the first moving one
+        th = None if theta is None else np.asarray(theta, dtype=float)[ok]
+        onset = _angle_onset(t, th, dev, direction, last_rest, limit)
+    if onset is None:  # the onset lies between the last sample at rest and the first moving one
+        onset = 0.5 * float(t[last_rest] + t[min(grow, n - 1)])
     return Breakaway(onset, direction, int(ok[last_rest]), float(base(np.array([onset]))[0]), noise)
 
 
@@ -689,7 +792,7 @@ def _startability_run(key, cols, settings, excluded, notes):
 
     try:
         try:
-            b = find_breakaway(t, cols["speed_rad_s"], settings.rest_speed)
+            b = find_breakaway(t, cols["speed_rad_s"], settings.rest_speed, cols["theta_rad"])
         except NoBreakaway:
             if turned(t[-1] + 1.0) <= settings.stuck_turn:
                 raise

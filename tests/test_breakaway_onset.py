@@ -1,0 +1,91 @@
+"""Breakaway onset at a low sample rate, where the speed leaves rest within one or two
+samples and then meets a speed limit (a dynamometer's limiter): the onset, and so the
+pressures at it, must not depend on where the true breakaway falls between samples.
+
+Logs built here from kinematics alone (not by motorid's simulator): speed ω = min(a·u, W),
+u = max(t − t0, 0), shaft angle its exact integral, quantized like an encoder."""
+
+import math
+
+import numpy as np
+import pytest
+
+from motorid.identify import extract as ex
+
+RATE = 25.0  # Hz: 40 ms between samples
+RAMP = 2.5e5  # Pa/s on the inlet
+
+
+def fast_breakaway(t0, alpha, w_max=1.0472, rate=RATE, angle_step=0.0, speed_noise=0.0, seed=0, duration=6.0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration, 1.0 / rate)
+    u = np.clip(t - t0, 0.0, None)
+    u_s = w_max / alpha
+    speed = np.minimum(alpha * u, w_max) + speed_noise * rng.standard_normal(t.size)
+    theta = 0.7 + np.where(u <= u_s, 0.5 * alpha * u * u, w_max * (u - 0.5 * u_s))
+    if angle_step:
+        theta = np.round(theta / angle_step) * angle_step
+    inlet = 50e5 + RAMP * t
+    return t, speed, theta, inlet
+
+
+def onset_errors(alpha, phases, **kw):
+    out = []
+    for ph in phases:
+        t0 = 4.0 + ph / RATE
+        t, w, th, _ = fast_breakaway(t0, alpha, **kw)
+        out.append(ex.find_breakaway(t, w, theta=th).onset_time - t0)
+    return np.array(out)
+
+
+PHASES = np.linspace(0.03, 0.97, 17)
+
+
+def test_two_growth_samples_place_the_onset_at_every_sample_phase():
+    # limit reached 52 ms after the onset: one or two samples on the linear growth
+    err = onset_errors(20.0, PHASES)
+    assert np.max(np.abs(err)) < 0.3e-3, err  # (the former quadratic hinge: up to ±20 ms)
+
+
+def test_one_growth_sample_and_the_angle_place_the_onset():
+    # limit reached 26 ms after the onset: the first moving sample is often already on it
+    err = onset_errors(40.0, PHASES, angle_step=math.radians(0.01))
+    below = PHASES / RATE < 1.0472 / 40.0 - 1e-3  # first moving sample still below the limit
+    assert np.max(np.abs(err[~below])) < 0.5e-3, err
+    # on the limit the angle bounds the onset to an interval; its middle is within a quarter sample
+    assert np.max(np.abs(err[below])) < 0.25 / RATE, err
+    assert abs(np.mean(err)) < 3e-3, err
+
+
+def test_onset_error_is_not_set_by_the_sample_phase_with_noise():
+    err = np.array([onset_errors(20.0, PHASES[::4], angle_step=math.radians(0.01), speed_noise=2e-4, seed=s)
+                    for s in range(3)])
+    assert np.max(np.abs(err)) < 1e-3, err
+    assert abs(np.mean(err)) < 0.3e-3
+
+
+def test_pressure_at_onset_follows_the_ramp_at_every_phase():
+    for ph in PHASES[::3]:
+        t0 = 4.0 + ph / RATE
+        t, w, th, inlet = fast_breakaway(t0, 40.0, angle_step=math.radians(0.01))
+        b = ex.find_breakaway(t, w, theta=th)
+        p = ex.value_at_onset(t, inlet, b.onset_time, 50)
+        assert abs(p - (50e5 + RAMP * t0)) < 0.25 * RAMP / RATE, (ph, p)  # a quarter sample of ramp
+
+
+def test_reading_against_the_motion_just_before_the_onset_is_not_motion():
+    t0 = 4.0 + 0.98 / RATE  # the true onset just before a sample
+    t, w, th, _ = fast_breakaway(t0, 20.0)
+    k = int(np.searchsorted(t, t0))  # first moving sample
+    w[k - 1] = -5e-3  # a reading against the motion at the last sample at rest
+    w[: k - 1] += 1e-3 * np.random.default_rng(3).standard_normal(k - 1)
+    b = ex.find_breakaway(t, w, theta=th)
+    assert b.onset_time == pytest.approx(t0, abs=1e-3)
+
+
+def test_without_the_angle_a_single_growth_sample_gives_the_middle_of_the_interval():
+    t0 = 4.0 + 0.5 / RATE
+    t, w, _, _ = fast_breakaway(t0, 100.0)  # on the limit at the first moving sample
+    b = ex.find_breakaway(t, w)
+    k = int(np.searchsorted(t, t0))
+    assert b.onset_time == pytest.approx(0.5 * (t[k - 1] + t[k]))
