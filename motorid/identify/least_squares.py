@@ -750,11 +750,19 @@ def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray):
     verr = getattr(problem.data, "viscosity_error", None)
     if verr is None or not verr.any or not problem.has_running or problem.cells is None:
         return None, {}
-    modes = verr.modes(problem.run_of, np.asarray(problem.data.running.time))
-    n_cells, K = problem.n_cells, modes.shape[1]
+    n_cells, K = problem.n_cells, verr.factor.shape[1]
     counts = np.maximum(np.bincount(problem.cell_of, minlength=n_cells), 1)
-    cell_modes = np.stack([np.bincount(problem.cell_of, weights=modes[:, k], minlength=n_cells)
-                           for k in range(K)], axis=1) / counts[:, None]
+    # cell means of the Chebyshev basis (one column at a time: no (samples × K) array), then the modes
+    u = (np.asarray(problem.data.running.time, dtype=float) - verr.center[problem.run_of]) / verr.half_span[problem.run_of]
+    cell_basis = np.empty((n_cells, K))
+    prev, cur = np.ones_like(u), u
+    for k in range(K):
+        col = prev if k == 0 else cur
+        cell_basis[:, k] = np.bincount(problem.cell_of, weights=col, minlength=n_cells) / counts
+        if k >= 1:
+            prev, cur = cur, 2.0 * u * cur - prev
+    del u, prev, cur
+    cell_modes = np.einsum("cj,cjk->ck", cell_basis, verr.factor[problem.cell_run])
     ctx = problem.ctx()
     J, g = (np.asarray(a) for a in _viscosity_sensitivity(_as_jnp(values), ctx))
     n_runs = max(len(problem.data.runs), int(problem.cell_run.max()) + 1)  # aligned with Dataset.runs
