@@ -75,3 +75,16 @@ def test_posterior_carries_the_smoothed_viscosity_error(fitted):
     post = sample_posterior(ls, spec, seed=6, progress=False)
     assert post.std["KL0"] == pytest.approx(ls.std["KL0"], rel=0.12)
     assert post.std["KL0"] > 1.15 * data_only
+
+
+def test_result_json_names_the_viscosity_share(fitted):
+    from motorid.identify.results import result_document
+
+    ls, spec = fitted
+    doc = result_document(ls, spec)
+    e = doc["parameters"]["KL0"]
+    i = ls.free.index("KL0")
+    assert e["std_viscosity"] == pytest.approx(math.sqrt(ls.covariance_viscosity[i, i]))
+    assert 0 < e["std_viscosity"] < e["std"]
+    # the breakaway-only parameters do not see the viscosity
+    assert "std_viscosity" not in doc["parameters"]["Ks"]

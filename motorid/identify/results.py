@@ -132,6 +132,12 @@ def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict 
             entry["ci95"] = [ls.values[k] - half, ls.values[k] + half]
             if np.isfinite(dof.get(k, float("inf"))):
                 entry["dof"] = dof[k]
+            visc = getattr(ls, "covariance_viscosity", None)
+            if visc is not None and k in ls.free:
+                i = ls.free.index(k)
+                if visc[i, i] > 1e-4 * ls.std[k] ** 2:
+                    # the part of std that the smoothed viscosity's run-level error carries
+                    entry["std_viscosity"] = float(np.sqrt(visc[i, i]))
         else:
             entry["reason"] = ls.reasons.get(k, "not determined by these logs")
         if bayes is not None and k in bayes.median:
