@@ -328,7 +328,10 @@ def suggest_runs(ls, dataset, spec, candidates: Sequence[Candidate] | None = Non
 
     The noise of a candidate's samples is the fitted pooled level of each channel
     (``ls.noise``; the breakaway channel's is ``ls.noise['breakaway']``, or the
-    torque's when the campaign has no breakaway).  Returns a dict:
+    torque's when the campaign has no breakaway).  The share of the covariance
+    that the campaign's smoothed viscosity carries (``ls.covariance_viscosity``)
+    is kept, shrinking as the added run sharpens the rest (a new run's own
+    viscosity error is left out).  Returns a dict:
     ``suggestions`` (the best ``top`` :class:`Suggestion`), ``worst`` (the
     parameter), ``std_now``, and ``unidentified``: for each parameter the logs
     cannot identify, the runs that would, and the best candidate that makes it
@@ -351,7 +354,20 @@ def suggest_runs(ls, dataset, spec, candidates: Sequence[Candidate] | None = Non
                                                 events=cand.events))
     if names:
         base = campaign_information(ls, dataset, spec, names)
-        std_now, _ = cramer_rao(base, names)
+        # the smoothed viscosity's run-level error (ls.covariance_viscosity = C M C with C
+        # the data's covariance): more data shrink C and with it that share, C' M C'
+        visc = getattr(ls, "covariance_viscosity", None)
+        shared = base @ visc @ base if visc is not None and visc.shape == base.shape else None
+
+        def bound(info):
+            std, cov = cramer_rao(info, names)
+            if shared is None:
+                return std
+            total = np.diag(cov + cov @ shared @ cov)
+            return {k: (float(math.sqrt(max(total[i], 0.0))) if math.isfinite(std[k]) else math.inf)
+                    for i, k in enumerate(names)}
+
+        std_now = bound(base)
         rel_now = {k: _relative(k, params[k], std_now[k], ls.mechanisms) for k in names}
         if parameter is not None and parameter not in names:
             raise InputError(f"parameter '{parameter}' is not identified by these logs "
@@ -361,7 +377,7 @@ def suggest_runs(ls, dataset, spec, candidates: Sequence[Candidate] | None = Non
         sel = [all_names.index(k) for k in names]
         sugg = []
         for cand, ci in zip(candidates, cand_info_all):
-            std_after, _ = cramer_rao(base + ci[np.ix_(sel, sel)], names)
+            std_after = bound(base + ci[np.ix_(sel, sel)])
             rel_after = {k: _relative(k, params[k], std_after[k], ls.mechanisms) for k in names}
             sugg.append(Suggestion(cand, worst, std_now[worst], std_after[worst], rel_now[worst],
                                    rel_after[worst], max(names, key=lambda k: rel_after[k]), std_after))

@@ -113,3 +113,21 @@ def test_plan_cli(tmp_path, capsys):
     assert main(["plan", str(log), "--motor", str(motor), "--parameter", "KFS"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(line.startswith("motorid plan: error:") for line in err)
+
+
+def test_plan_counts_the_viscosity_share_of_the_standard_errors():
+    """A leakage coefficient's standard error holds the smoothed viscosity's run-level
+    error; the plan's present std must too (it would otherwise promise runs that
+    cannot shrink what the viscometer sets)."""
+    from conftest import simulated
+    from motorid.identify.extract import extract
+    from motorid.identify.least_squares import fit_least_squares
+
+    frame, spec, _ = simulated(seed=1)
+    data = extract(frame, spec)
+    ls = fit_least_squares(data, spec)
+    plan = design.suggest_runs(ls, data, spec, candidates=[design.constant_speed_candidate(spec, 100.0, 250.0, 1)],
+                               parameter="KL0")
+    data_only, _ = design.cramer_rao(design.campaign_information(ls, data, spec), ls.free)
+    assert plan["std_now"]["KL0"] > 1.1 * data_only["KL0"]
+    assert plan["std_now"]["KL0"] == pytest.approx(ls.std["KL0"], rel=0.1)
