@@ -319,8 +319,18 @@ def efficiency(quick: bool, budget_s: float):
     means = np.array([(by_event[a].mean(), by_event[b].mean()) for a, b in pairs if a in by_event and b in by_event])
     frozen = float(np.sqrt(np.mean(means**2))) if means.size else math.nan
     sigma, true_s = noise_model_sigma(spec, truth_p, prots, first["camp"], first["data"])
-    sigma["breakaway"] = np.full(first["data"].n_events, sigma_brk)
     data0 = first["data"]
+    # each event's own σ: the held torque compares with pressures read at the onset, whose error
+    # grows with the reading, so the scatter grows with the port pressures; a variance
+    # a + b·(P_A² + P_B²) fitted to the per-event variances over the replications (unweighted:
+    # weights from the noisy variances themselves would pull the fit low)
+    ev_keys = list(data0.event_runs)
+    ev_var = np.array([by_event[k].var(ddof=1) for k in ev_keys])
+    ev_x2 = np.asarray(data0.events.p_a) ** 2 + np.asarray(data0.events.p_b) ** 2
+    A = np.c_[np.ones_like(ev_x2), ev_x2 / np.median(ev_x2)]
+    coef = np.linalg.lstsq(A, ev_var, rcond=None)[0]
+    brk_model = np.sqrt(np.clip(A @ coef, 1e-12, None))
+    sigma["breakaway"] = brk_model
     measured = dict(data0.measured, breakaway=data0.held_torque)
     info = design.fisher_information(truth_p, spec, None, sigma, names=names, running=true_s, events=data0.events,
                                      measured=measured)
@@ -328,6 +338,12 @@ def efficiency(quick: bool, budget_s: float):
     # the same bound with the sensors' noise alone (no unresolved acceleration), for the record
     sig0, _ = noise_model_sigma(spec, truth_p, prots, first["camp"], first["data"], unresolved=False)
     sig0["breakaway"] = sigma["breakaway"]
+    sig1 = dict(sigma, breakaway=np.full(data0.n_events, sigma_brk))
+    crb_pooled, _ = viscosity_nuisance_bound(spec, truth_p, names, prots, first["camp"], data0, sig1, true_s,
+                                             design.fisher_information(truth_p, spec, None, sig1, names=names,
+                                                                       running=true_s, events=data0.events,
+                                                                       measured=dict(data0.measured,
+                                                                                     breakaway=data0.held_torque)))
     info0 = design.fisher_information(truth_p, spec, None, sig0, names=names, running=true_s, events=data0.events,
                                       measured=measured)
     crb0, _ = viscosity_nuisance_bound(spec, truth_p, names, prots, first["camp"], data0, sig0, true_s, info0)
@@ -381,6 +397,10 @@ def efficiency(quick: bool, budget_s: float):
                 cov68_normal=cov68_normal, cov95_normal=cov95_normal, nu=nu, diag=diag, n_diag=len(dreps),
                 bias_crb=bias / crb_v, emp=emp, crb=crb_v, ls_std=ls_std,
                 pooled68=pooled68, pooled95=pooled95, se68=se68, se95=se95, sigma_brk=sigma_brk,
+                brk_sigma_range=(float(brk_model.min()), float(brk_model.max())),
+                brk_psum_range=(float(np.min(np.asarray(data0.events.p_a + data0.events.p_b))),
+                                float(np.max(np.asarray(data0.events.p_a + data0.events.p_b)))),
+                crb_pooled={k: crb_pooled[k] for k in ("KFS", "Ks") if k in crb_pooled},
                 brk_offset=brk_offset, n_events=data0.n_events, rho_fixed=rho_fixed, frozen=frozen,
                 n_pairs=len(pairs), zstd_fixed={k: float(np.std((vals[:, j] - tv[j]) / stds[:, j]))
                                                 for j, k in enumerate(names) if k in ("KFS", "Ks")}, n_running=data0.n_running, t_rep=t_rep,
@@ -539,9 +559,15 @@ def render(eff: dict, cal: dict, quick: bool, seconds: float) -> str:
         "so it enters as input noise (per run, its mean square on the noise-free trajectory).  Without this term "
         "the bound on K_v would be about half as large, and no estimator that takes the acceleration from the "
         "logged speed could reach it.  The held breakaway torque is not a sensor reading but an extracted "
-        "quantity (its error comes from locating the onset on a pressure ramp), so its σ is measured: the "
-        f"pooled within-event standard deviation of held − predict_breakaway(truth) over the replications, "
-        f"σ_brk = {eff['sigma_brk']:.4g} N·m (mean offset {eff['brk_offset']:+.3g} N·m).",
+        "quantity (its error comes from locating the onset on a pressure ramp and from the pressures read "
+        "there), so its σ is measured, per event: the standard deviation of held − predict_breakaway(truth) "
+        "over the replications grows with the port pressures (a transducer's error grows with its reading), "
+        "and a variance a + b·(P_A² + P_B²) fitted to the events' variances gives each event its σ: "
+        f"{eff['brk_sigma_range'][0]:.4f}–{eff['brk_sigma_range'][1]:.4f} N·m from "
+        f"{eff['brk_psum_range'][0] / 1e5:.0f} to {eff['brk_psum_range'][1] / 1e5:.0f} bar of P_A + P_B "
+        f"(pooled {eff['sigma_brk']:.4f} N·m; mean offset {eff['brk_offset']:+.3g} N·m).  With the pooled σ "
+        "for every event instead the bound would be "
+        + ", ".join(f"{k} {v:.3g}" for k, v in eff.get("crb_pooled", {}).items()) + ".",
         "",
         f"### Least squares over {n} replications",
         "",

@@ -23,7 +23,8 @@ def test_interval_dof_rests_on_the_breakaway_events(fitted):
 
     ls, spec = fitted
     dof = interval_dof(ls)
-    n_brk = int(np.sum(ls.inliers["breakaway"])) - 2  # K_FS, K_s out of the events' dof
+    # K_FS, K_s (and the variance model's shape) out of the events' dof
+    n_brk = int(np.sum(ls.inliers["breakaway"])) - 2 - (ls.breakaway_noise_shape > 0)
     # breakaway-only parameters: about the events' dof (a little more: K_F, T_Fc come from running torque)
     for k in ("KFS", "Ks"):
         assert n_brk <= dof[k] < 3 * n_brk, (k, dof[k], n_brk)

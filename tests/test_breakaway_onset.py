@@ -89,3 +89,21 @@ def test_without_the_angle_a_single_growth_sample_gives_the_middle_of_the_interv
     b = ex.find_breakaway(t, w)
     k = int(np.searchsorted(t, t0))
     assert b.onset_time == pytest.approx(0.5 * (t[k - 1] + t[k]))
+
+
+def test_breakaway_noise_grows_with_the_port_pressures_where_the_events_show_it():
+    from motorid.identify.least_squares import breakaway_noise
+
+    rng = np.random.default_rng(11)
+    p = np.repeat([60e5, 130e5, 235e5], 100)
+    x2 = p**2 + (7e5) ** 2
+    ref = np.median(x2)
+    s = 0.02 * np.sqrt(1.0 + 1.0 * x2 / ref)
+    s0, gamma, ref_out = breakaway_noise(s * rng.standard_normal(p.size), x2, k=2)
+    assert ref_out == pytest.approx(ref)
+    assert 0.5 < gamma < 2.0 and s0 == pytest.approx(0.02, rel=0.15)
+    # even scatter: the shape comes out near nothing
+    s0, gamma, _ = breakaway_noise(0.03 * rng.standard_normal(p.size), x2, k=2)
+    assert gamma < 0.15 and s0 == pytest.approx(0.03, rel=0.1)
+    # too few events to tell: one level
+    assert breakaway_noise(np.array([0.01, -0.02, 0.03]), x2[:3], k=2)[1] == 0.0

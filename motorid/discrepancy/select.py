@@ -50,7 +50,7 @@ class Diagnosis:
 def _fixed(ls: FitResult) -> tuple[dict, dict]:
     noise = {c: ls.noise_by_run[c] for c in ls.noise_by_run}
     if "breakaway" in ls.noise and ls.noise["breakaway"] is not None:
-        noise["breakaway"] = ls.noise["breakaway"]
+        noise["breakaway"] = np.asarray(ls.sigma["breakaway"], dtype=float)  # per event
     return noise, dict(ls.inliers)
 
 

@@ -86,6 +86,8 @@ class FitResult:
     covariance_viscosity: np.ndarray | None = None
     # channel -> per run, the variance the same error adds to the run's mean residual [SI²]
     viscosity_run_variance: dict = field(default_factory=dict)
+    # γ of the breakaway events' variance model σ_i² = σ₀²(1 + γ x_i²/median x²) (0: one level)
+    breakaway_noise_shape: float = 0.0
 
     @property
     def reduced_chi2(self) -> float:
@@ -177,6 +179,41 @@ def _robust_std(x) -> float:
     if x.size < 2:
         return np.nan
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+BREAKAWAY_SHAPES = np.r_[0.0, np.logspace(-2.0, 3.0, 61)]  # γ grid of the breakaway variance model
+
+
+def breakaway_noise(res: np.ndarray, x2: np.ndarray, k: int, lr_threshold: float = 0.0):
+    """Variance model of the held breakaway torque → (σ₀ [N·m], γ, median x² [Pa²]).
+
+    The held torque is compared with the torque the port pressures at the onset
+    give, and a pressure transducer's error grows with its reading (a relative
+    error, a supply ripple), so the events at high pressure scatter more:
+    σ_i² = σ₀²·(1 + γ·x_i²/median x²), x_i² = P_A,i² + P_B,i².  σ₀ and γ ≥ 0 by
+    maximum likelihood (σ₀² profiled as Σ r²/h² over n − k, k the parameters only
+    the events determine; γ on a grid; 8 events at least, else one σ).  γ is
+    always estimated (``lr_threshold`` = 0): with a few dozen events a test for it
+    has little power (at 30 events and a variance that grows 2.6-fold over the
+    loads, a χ²₁ test at 5 % kept it in a third of the campaigns), and one level for
+    all events puts too little weight on the low-pressure ones and misstates the
+    uncertainty of K_FS (too narrow) and K_s (too wide); where the scatter is in
+    fact even, γ comes out near 0.  res, x2 : residuals and x² of the inlier
+    events; σ of any event is then σ₀·√(1 + γ·x²/median x²).
+    """
+    r2 = np.asarray(res, dtype=float) ** 2
+    x2 = np.asarray(x2, dtype=float)
+    n = r2.size
+    dof = max(n - k, 1)
+    ref = float(np.median(x2)) if n and np.median(x2) > 0 else 1.0
+    h2 = 1.0 + BREAKAWAY_SHAPES[:, None] * (x2[None, :] / ref)
+    s0 = np.sum(r2[None, :] / h2, axis=1) / dof
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nll = np.sum(np.log(h2), axis=1) + n * np.log(np.maximum(s0, 1e-300))
+    best = int(np.nanargmin(nll)) if n >= 8 else 0
+    if nll[0] - nll[best] <= lr_threshold:
+        best = 0
+    return float(np.sqrt(s0[best])), float(BREAKAWAY_SHAPES[best]), ref
 
 
 def _by_run(values, run_of_sample, n_runs):
@@ -516,7 +553,7 @@ class _Problem:
             out["breakaway"] = self.held_torque
         return out
 
-    def set_cells(self, inliers: dict, sigma_runs: dict, sigma_breakaway: float | None):
+    def set_cells(self, inliers: dict, sigma_runs: dict, sigma_breakaway):
         """Cell means of each channel over its inlier samples, and their weights."""
         obs, w = {}, {}
         for c in RUNNING_CHANNELS if self.has_running else ():
@@ -530,7 +567,7 @@ class _Problem:
             ok = inliers["breakaway"]
             size = int(np.asarray(self.events_padded.theta).size)
             obs["breakaway"] = pad(np.where(ok, self.held_torque, 0.0), size)
-            w["breakaway"] = pad(np.where(ok, 1.0 / sigma_breakaway, 0.0), size)
+            w["breakaway"] = pad(np.where(ok, 1.0 / np.broadcast_to(sigma_breakaway, ok.shape), 0.0), size)
         self.cells = (obs, w)
         self.cells_version = getattr(self, "cells_version", 0) + 1
 
@@ -599,9 +636,11 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
 
     # model-free start of the noise levels: first differences within each run
     sig_runs = {c: _floor_noise(_initial_noise(obs[c], run_of, n_runs), obs[c]) for c in RUNNING_CHANNELS if c in obs}
-    sig_brk = None
+    sig_brk, brk_gamma = None, 0.0  # σ of each breakaway event (an array once the rounds settle it)
     if "breakaway" in obs:
         sig_brk = max(_robust_std(np.diff(obs["breakaway"])) / np.sqrt(2) if obs["breakaway"].size > 2 else 1.0, 1e-6)
+        ev = data.events
+        brk_x2 = np.asarray(ev.p_a, dtype=float) ** 2 + np.asarray(ev.p_b, dtype=float) ** 2
     inliers = {c: np.isfinite(v) for c, v in obs.items()}
     values = {k: float(start[k]) for k in free}
 
@@ -610,6 +649,8 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     if opt.fixed_noise is not None:
         sig_runs = {c: np.asarray(opt.fixed_noise[c], dtype=float) for c in sig_runs}
         sig_brk = opt.fixed_noise.get("breakaway", sig_brk)
+        if sig_brk is not None and "breakaway" in obs:
+            sig_brk = np.broadcast_to(np.asarray(sig_brk, dtype=float), obs["breakaway"].shape).copy()
     if opt.fixed_inliers is not None:
         inliers = {c: np.asarray(opt.fixed_inliers[c], dtype=bool) & np.isfinite(obs[c]) for c in obs}
     rounds = 0 if (opt.fixed_noise is not None and opt.fixed_inliers is not None) else opt.rounds
@@ -633,14 +674,17 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
                 # the breakaway-only parameters (K_FS, K_s) taken out of the degrees of freedom —
                 # with a few dozen events the MAD would scatter by a fifth from campaign to campaign
                 k = sum(1 for n in ("KFS", "Ks") if n in free)
+                scale = np.nanmax(np.abs(obs[c])) if np.any(np.isfinite(obs[c])) else 1.0
                 if round_ == 0 and finite.size >= 8:
                     est = _robust_std(finite)
+                    sig_brk = float(max(est, 1e-9 * scale)) if np.isfinite(est) else 1.0
                 elif finite.size > k + 1:
-                    est = float(np.sqrt(np.sum(finite**2) / (finite.size - k)))
+                    # one level, or a level growing with the port pressures (breakaway_noise)
+                    use = np.isfinite(r)
+                    s0, brk_gamma, ref = breakaway_noise(r[use], brk_x2[use], k)
+                    sig_brk = np.maximum(s0 * np.sqrt(1.0 + brk_gamma * brk_x2 / ref), 1e-9 * scale)
                 else:
-                    est = np.nan
-                scale = np.nanmax(np.abs(obs[c])) if np.any(np.isfinite(obs[c])) else 1.0
-                sig_brk = float(max(est, 1e-9 * scale)) if np.isfinite(est) else 1.0
+                    sig_brk = 1.0
                 new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * sig_brk)
             else:
                 sig_runs[c] = _floor_noise(_residual_noise(r, run_of, n_runs, robust=round_ == 0), obs[c])
@@ -664,7 +708,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     residuals = {c: obs[c] - pred[c] for c in obs}
     sig = {c: sig_runs[c][run_of] for c in sig_runs}
     if "breakaway" in obs:
-        sig["breakaway"] = np.full(obs["breakaway"].shape, sig_brk)
+        sig["breakaway"] = np.broadcast_to(np.asarray(sig_brk, dtype=float), obs["breakaway"].shape).copy()
     used = {c: int(np.sum(inliers[c])) for c in obs}
     chi2 = float(sum(np.sum((residuals[c][inliers[c]] / sig[c][inliers[c]]) ** 2) for c in obs))
     dof = max(sum(used.values()) - len(free), 1)
@@ -703,7 +747,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         if not has.any():
             noise[c] = None
         elif c == "breakaway":
-            noise[c] = float(sig_brk)
+            noise[c] = float(np.median(sig["breakaway"][has]))  # the events' median σ
         else:
             noise[c] = float(np.median(sig_runs[c][np.unique(run_of[has])]))
     return FitResult(
@@ -712,7 +756,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         outliers={c: int(np.sum(np.isfinite(obs[c]) & ~inliers[c])) for c in obs},
         used=used, chi2=chi2, dof=dof, steps=steps_total, converged=bool(converged), warnings=warnings,
         residuals=residuals, sigma=sig, inliers=inliers, params_all=all_params, mechanisms=tuple(mechanisms), problem=problem,
-        covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var,
+        covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var, breakaway_noise_shape=brk_gamma,
     )
 
 

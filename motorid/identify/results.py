@@ -38,7 +38,8 @@ def interval_dof(ls: FitResult) -> dict:
     if not free or problem is None or not getattr(problem, "has_events", False) or problem.cells is None:
         return out
     n_events = int(np.sum(ls.inliers.get("breakaway", np.zeros(0, bool))))
-    nu_brk = n_events - sum(1 for k in BREAKAWAY_ONLY if k in free)
+    nu_brk = (n_events - sum(1 for k in BREAKAWAY_ONLY if k in free)
+              - (1 if getattr(ls, "breakaway_noise_shape", 0.0) > 0 else 0))  # the variance model's shape
     if nu_brk < 1:
         return out
     from motorid.identify.least_squares import _normal_equations
