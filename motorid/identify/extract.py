@@ -390,7 +390,7 @@ def smooth_viscosity(time, viscosity, max_degree: int = 5):
     where the run is shorter than 20 samples, or the readings do not scatter at
     all (a held viscosity), the readings are returned as read, with degree −1
     and a zero factor.  σ is the readings' deviation about the curve [Pa·s]; factor
-    (VISCOSITY_MODES, VISCOSITY_MODES) is the Cholesky factor of the curve's
+    (VISCOSITY_MODES, VISCOSITY_MODES) is a square root L (L Lᵀ) of the curve's
     coefficient covariance σ²(XᵀX)⁻¹ (see :class:`ViscositySmoothing`).
     """
     t = np.asarray(time, dtype=float)
@@ -408,43 +408,48 @@ def smooth_viscosity(time, viscosity, max_degree: int = 5):
         return as_read
     u = (t - center) / half
     X_all = np.polynomial.chebyshev.chebvander(u, min(max_degree, VISCOSITY_MODES - 1))
-
-    def fit(degree):
-        X = X_all[:, : degree + 1]
-        keep = np.ones(n, bool)
-        for _ in range(4):
-            coef = np.linalg.lstsq(X[keep], mu[keep], rcond=None)[0]
-            r = mu - X @ coef
-            sigma = _MAD * float(np.median(np.abs(r[keep] - np.median(r[keep]))))
-            new = np.abs(r) <= max(4.0 * sigma, 1e-300)
-            if new.sum() < degree + 10 or np.array_equal(new, keep):
-                break
-            keep = new
-        rss = float(np.sum(r[keep] ** 2))
-        return coef, keep, rss, sigma
-
-    penalty = max(math.log(n), 10.0)
-    degree, (coef, keep, rss, sigma) = 0, fit(0)
-    while degree < X_all.shape[1] - 1 and n > degree + 12:
-        nxt = fit(degree + 1)
-        var = nxt[2] / max(nxt[1].sum() - degree - 2, 1)
-        if rss - nxt[2] <= penalty * var:
+    top = X_all.shape[1] - 1
+    # spikes: readings beyond 4 robust deviations of the highest-degree curve (a spike is
+    # one at any degree), found once
+    keep = np.ones(n, bool)
+    for _ in range(4):
+        coef = np.linalg.lstsq(X_all[keep], mu[keep], rcond=None)[0]
+        r = mu - X_all @ coef
+        sigma = _MAD * float(np.median(np.abs(r[keep] - np.median(r[keep]))))
+        new = np.abs(r) <= max(4.0 * sigma, 1e-300)
+        if new.sum() < top + 10 or np.array_equal(new, keep):
             break
-        degree, (coef, keep, rss, sigma) = degree + 1, nxt
+        keep = new
+    # every degree from one QR of the kept rows: the first d + 1 columns of Q span degree d
+    Q, R = np.linalg.qr(X_all[keep])
+    qy = Q.T @ mu[keep]
+    rss_all = float(mu[keep] @ mu[keep]) - np.cumsum(qy**2)  # residual sum of squares by degree
+    m = int(keep.sum())
+    penalty = max(math.log(n), 10.0)
+    degree = 0
+    while degree < top and m > degree + 12:
+        var = max(rss_all[degree + 1], 0.0) / max(m - degree - 2, 1)
+        if rss_all[degree] - rss_all[degree + 1] <= penalty * var:
+            break
+        degree += 1
+    Rd = R[: degree + 1, : degree + 1]
+    try:
+        coef = np.linalg.solve(Rd, qy[: degree + 1])
+    except np.linalg.LinAlgError:
+        return as_read
+    smooth = X_all[:, : degree + 1] @ coef
     # what is left must be white: lag-one autocorrelation of the (clipped) residuals in
     # time order within 3/√n of zero (a curve the polynomial misses leaves it positive)
-    rr = np.clip((mu - X_all[:, : degree + 1] @ coef)[order], -4.0 * sigma, 4.0 * sigma)
+    sigma = _MAD * float(np.median(np.abs((mu - smooth)[keep] - np.median((mu - smooth)[keep]))))
+    rr = np.clip((mu - smooth)[order], -4.0 * sigma, 4.0 * sigma)
     power = float(rr @ rr)
     if not (power > 0 and float(rr[:-1] @ rr[1:]) / power <= 3.0 / math.sqrt(n)):
         return as_read
-    X = X_all[keep, : degree + 1]
-    sigma_ls = math.sqrt(rss / max(keep.sum() - degree - 1, 1))
+    sigma_ls = math.sqrt(max(rss_all[degree], 0.0) / max(m - degree - 1, 1))
+    # covariance σ²(XᵀX)⁻¹ = σ² R⁻¹R⁻ᵀ: σR⁻¹ is a square root of it
     factor = np.zeros((VISCOSITY_MODES, VISCOSITY_MODES))
-    try:
-        factor[: degree + 1, : degree + 1] = np.linalg.cholesky(sigma_ls**2 * np.linalg.inv(X.T @ X))
-    except np.linalg.LinAlgError:
-        return as_read
-    return X_all[:, : degree + 1] @ coef, degree, sigma_ls, factor, center, half
+    factor[: degree + 1, : degree + 1] = sigma_ls * np.linalg.inv(Rd)
+    return smooth, degree, sigma_ls, factor, center, half
 
 
 # ----------------------------------------------------------------- breakaway

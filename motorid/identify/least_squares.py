@@ -787,6 +787,47 @@ def _viscosity_sensitivity(values: dict, ctx: _Ctx):
     return J, jax.jvp(of_viscosity, (mu,), (jnp.ones_like(mu),))[1]
 
 
+def _viscosity_jacobians(problem: _Problem, values: dict, ctx: _Ctx):
+    """(∂r/∂β, ∂r/∂μ) of the weighted residual rows of the cells, as :func:`_viscosity_sensitivity`.
+
+    Where the fit's exact quadratic expansion is at hand (:mod:`~motorid.identify.compress`)
+    ∂r/∂β comes from it in NumPy, and ∂r/∂μ from a central difference of two
+    passes of the cell predictions: no Jacobian program over every cell."""
+    exp = getattr(problem, "_expansion", None)
+    free = list(ctx.free)
+    if exp is None or getattr(problem, "_expansion_key", None) != tuple(free):
+        J, g = _viscosity_sensitivity(_as_jnp(values), ctx)
+        return np.asarray(J), np.asarray(g)
+    p = len(free)
+    d = np.array([values[k] for k in exp.names]) - exp.p0
+    dz = np.zeros((p + len(exp.pairs), p))  # ∂[δ; u(δ)]/∂δ
+    dz[:p] = np.eye(p)
+    for k, (a, b) in enumerate(exp.pairs):
+        dz[p + k, a] += exp.half[k] * d[b]
+        dz[p + k, b] += exp.half[k] * d[a]
+    mu = np.asarray(ctx.running.viscosity, dtype=float)
+    eps = 1e-6
+    up = _predictions_jit(_as_jnp(values), ctx._replace(running=ctx.running._replace(viscosity=mu * (1 + eps))))
+    down = _predictions_jit(_as_jnp(values), ctx._replace(running=ctx.running._replace(viscosity=mu * (1 - eps))))
+    rows_J, rows_g = [], []
+    for c in CHANNELS:
+        if c not in ctx.observed:
+            continue
+        size = int(np.asarray(ctx.observed[c]).size)
+        w = np.asarray(ctx.weights[c], dtype=float)
+        Jc, gc = np.zeros((size, p)), np.zeros(size)
+        if c in exp.blocks:
+            n_real, nz, X, _ = exp.blocks[c]
+            Jc[:n_real] = -(X.T @ dz[nz]) * w[:n_real, None]
+        if c in RUNNING_CHANNELS:
+            with np.errstate(invalid="ignore"):
+                slope = (np.asarray(up[c]) - np.asarray(down[c])) / (2 * eps * mu)
+            gc = -w * np.where(np.isfinite(slope), slope, 0.0)
+        rows_J.append(Jc)
+        rows_g.append(gc)
+    return np.concatenate(rows_J), np.concatenate(rows_g)
+
+
 def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray):
     """What the smoothed viscosity's run-level error does to the fit →
     (parameter covariance [SI²], channel → variance of each run's mean residual [SI²]).
@@ -820,7 +861,7 @@ def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray):
     del u, prev, cur
     cell_modes = np.einsum("cj,cjk->ck", cell_basis, verr.factor[problem.cell_run])
     ctx = problem.ctx()
-    J, g = (np.asarray(a) for a in _viscosity_sensitivity(_as_jnp(values), ctx))
+    J, g = _viscosity_jacobians(problem, values, ctx)
     n_runs = max(len(problem.data.runs), int(problem.cell_run.max()) + 1)  # aligned with Dataset.runs
     B = np.zeros((n_runs, K, J.shape[1]))  # Jᵀ ∂r/∂z per run and mode
     run_var = {}
