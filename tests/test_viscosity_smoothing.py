@@ -170,3 +170,26 @@ def test_cells_carry_the_mean_leakage_when_viscosity_varies_within_a_cell():
         assert fit.values[k] == pytest.approx(truth[k], rel=1e-6), k
     # (the harmonics also see θ vary within the cell: a far smaller, second-order term)
     assert fit.values["KL_a1"] == pytest.approx(truth["KL_a1"], rel=1e-4)
+
+
+def test_viscosity_jacobians_from_the_expansion_match_the_jax_jacobian():
+    """The covariance's fast path (∂r/∂β from the fit's exact quadratic expansion,
+    ∂r/∂μ from two passes of the predictions) against forward-mode JAX over every cell."""
+    from motorid.identify.least_squares import _viscosity_jacobians
+
+    frame, spec, _ = simulated(seed=5)
+    data = extract(frame, spec)
+    ls = fit_least_squares(data, spec)
+    problem = ls.problem
+    assert getattr(problem, "_expansion", None) is not None
+    values = {k: ls.values[k] for k in ls.free}
+    ctx = problem.ctx()
+    fast, g_fast = _viscosity_jacobians(problem, values, ctx)
+    problem._expansion = None  # the fallback: a Jacobian program over every cell
+    slow, g_slow = _viscosity_jacobians(problem, values, ctx)
+    assert set(g_fast) == set(g_slow) == {"torque", "q_a", "q_b", "q_case"}
+    for c in g_fast:
+        np.testing.assert_allclose(g_fast[c], g_slow[c], rtol=1e-5, atol=1e-7 * np.abs(g_slow[c]).max())
+    for j in range(slow.shape[1]):
+        np.testing.assert_allclose(fast[:, j], slow[:, j], rtol=1e-5, atol=1e-7 * np.abs(slow[:, j]).max())
+    assert np.abs(slow).max() > 0

@@ -304,10 +304,21 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
     span = np.ptp(t[sel])
     u = 2.0 * (t[sel] - t[sel].min()) / max(span, 1e-300) - 1.0
     trend = np.polynomial.chebyshev.chebvander(u, int(np.clip(revolutions / 2, 2, 10)))
+    m = trend.shape[1]
+    X = np.column_stack([trend] + [np.column_stack([np.cos(k * th[sel]), np.sin(k * th[sel])]) for k in orders])
+    y = w[sel] - np.mean(w[sel])  # (the trend holds the constant; centring keeps yᵀy − bᵀXᵀy exact)
+    # every subset of orders from one Gram matrix (einsum: no threaded BLAS against XLA's threads)
+    gram, xty, yy = np.einsum("ni,nj->ij", X, X), np.einsum("ni,n->i", X, y), float(y @ y)
+
     def fit(kept):
-        X = np.column_stack([trend] + [np.column_stack([np.cos(k * th[sel]), np.sin(k * th[sel])]) for k in kept])
-        coef = np.linalg.lstsq(X, w[sel], rcond=None)[0]
-        return coef, float(np.sum((w[sel] - X @ coef) ** 2)), sel.size - X.shape[1], np.linalg.cond(X)
+        cols = np.r_[np.arange(m), [m + 2 * orders.index(k) + j for k in kept for j in (0, 1)]].astype(int)
+        g = gram[np.ix_(cols, cols)]
+        lam = np.linalg.eigvalsh(g)
+        cond = math.sqrt(lam[-1] / lam[0]) if lam[0] > 0 else math.inf  # of X: √ of its Gram's
+        if not cond <= 1e8:
+            return None, 0.0, 0, cond
+        coef = np.linalg.solve(g, xty[cols])
+        return coef, max(yy - float(coef @ xty[cols]), 0.0), sel.size - cols.size, cond
 
     # keep only the orders that are there: an order fitted to noise would add its noise
     # back amplified k·ω times through the derivative

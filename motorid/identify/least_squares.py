@@ -788,16 +788,23 @@ def _viscosity_sensitivity(values: dict, ctx: _Ctx):
 
 
 def _viscosity_jacobians(problem: _Problem, values: dict, ctx: _Ctx):
-    """(∂r/∂β, ∂r/∂μ) of the weighted residual rows of the cells, as :func:`_viscosity_sensitivity`.
+    """Of the weighted residual of the running cells, r_c = w·(observed − predicted) per
+    channel c → (Σ_c (∂r_c/∂β)(∂r_c/∂μ), cells × free; {c: ∂r_c/∂μ}, cells each).
 
     Where the fit's exact quadratic expansion is at hand (:mod:`~motorid.identify.compress`)
     ∂r/∂β comes from it in NumPy, and ∂r/∂μ from a central difference of two
-    passes of the cell predictions: no Jacobian program over every cell."""
+    passes of the cell predictions: no Jacobian program over every cell;
+    elsewhere from :func:`_viscosity_sensitivity`."""
+    n = problem.n_cells
+    running = [c for c in CHANNELS if c in RUNNING_CHANNELS and c in ctx.observed]
     exp = getattr(problem, "_expansion", None)
     free = list(ctx.free)
     if exp is None or getattr(problem, "_expansion_key", None) != tuple(free):
-        J, g = _viscosity_sensitivity(_as_jnp(values), ctx)
-        return np.asarray(J), np.asarray(g)
+        J, g = (np.asarray(x) for x in _viscosity_sensitivity(_as_jnp(values), ctx))
+        size = {c: int(np.asarray(ctx.observed[c]).size) for c in CHANNELS if c in ctx.observed}
+        start = {c: sum(size[d] for d in list(size)[:list(size).index(c)]) for c in running}
+        gs = {c: g[start[c]:start[c] + n] for c in running}
+        return sum(J[start[c]:start[c] + n] * gs[c][:, None] for c in running), gs
     p = len(free)
     d = np.array([values[k] for k in exp.names]) - exp.p0
     dz = np.zeros((p + len(exp.pairs), p))  # ∂[δ; u(δ)]/∂δ
@@ -809,23 +816,19 @@ def _viscosity_jacobians(problem: _Problem, values: dict, ctx: _Ctx):
     eps = 1e-6
     up = _predictions_jit(_as_jnp(values), ctx._replace(running=ctx.running._replace(viscosity=mu * (1 + eps))))
     down = _predictions_jit(_as_jnp(values), ctx._replace(running=ctx.running._replace(viscosity=mu * (1 - eps))))
-    rows_J, rows_g = [], []
-    for c in CHANNELS:
-        if c not in ctx.observed:
-            continue
-        size = int(np.asarray(ctx.observed[c]).size)
-        w = np.asarray(ctx.weights[c], dtype=float)
-        Jc, gc = np.zeros((size, p)), np.zeros(size)
-        if c in exp.blocks:
+    gs, rows, cols = {}, [], []
+    for c in running:
+        w = np.asarray(ctx.weights[c], dtype=float)[:n]
+        with np.errstate(invalid="ignore"):
+            slope = (np.asarray(up[c])[:n] - np.asarray(down[c])[:n]) / (2 * eps * mu[:n])
+        gs[c] = -w * np.where(np.isfinite(slope), slope, 0.0)
+        if c in exp.blocks:  # ∂r_c/∂β = −w·Xᵀ dz
             n_real, nz, X, _ = exp.blocks[c]
-            Jc[:n_real] = -(X.T @ dz[nz]) * w[:n_real, None]
-        if c in RUNNING_CHANNELS:
-            with np.errstate(invalid="ignore"):
-                slope = (np.asarray(up[c]) - np.asarray(down[c])) / (2 * eps * mu)
-            gc = -w * np.where(np.isfinite(slope), slope, 0.0)
-        rows_J.append(Jc)
-        rows_g.append(gc)
-    return np.concatenate(rows_J), np.concatenate(rows_g)
+            rows.append(X[:, :n] * (-w * gs[c]))
+            cols.append(dz[nz])
+    # every channel's terms at once (einsum, not a threaded BLAS that wakes against XLA's threads)
+    Jg = np.einsum("tn,tp->np", np.concatenate(rows), np.concatenate(cols)) if rows else np.zeros((n, p))
+    return Jg, gs
 
 
 def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray):
@@ -849,6 +852,10 @@ def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray):
         return None, {}
     n_cells, K = problem.n_cells, verr.factor.shape[1]
     counts = np.maximum(np.bincount(problem.cell_of, minlength=n_cells), 1)
+    n_runs = max(len(problem.data.runs), int(problem.cell_run.max()) + 1)  # aligned with Dataset.runs
+    # cells are numbered in run order: run r's cells are bounds[r]:bounds[r + 1]
+    bounds = np.searchsorted(problem.cell_run, np.arange(n_runs + 1))
+    smoothed = np.flatnonzero(np.any(verr.factor[:n_runs] != 0.0, axis=(1, 2)) & (np.diff(bounds) > 0))
     # cell means of the Chebyshev basis (one column at a time: no (samples × K) array), then the modes
     u = (np.asarray(problem.data.running.time, dtype=float) - verr.center[problem.run_of]) / verr.half_span[problem.run_of]
     cell_basis = np.empty((n_cells, K))
@@ -859,37 +866,29 @@ def viscosity_covariance(problem: _Problem, values: dict, cov: np.ndarray):
         if k >= 1:
             prev, cur = cur, 2.0 * u * cur - prev
     del u, prev, cur
-    cell_modes = np.einsum("cj,cjk->ck", cell_basis, verr.factor[problem.cell_run])
+    cell_modes = np.zeros((n_cells, K))
+    for r in smoothed:
+        cell_modes[bounds[r]:bounds[r + 1]] = cell_basis[bounds[r]:bounds[r + 1]] @ verr.factor[r]
     ctx = problem.ctx()
-    J, g = _viscosity_jacobians(problem, values, ctx)
-    n_runs = max(len(problem.data.runs), int(problem.cell_run.max()) + 1)  # aligned with Dataset.runs
-    B = np.zeros((n_runs, K, J.shape[1]))  # Jᵀ ∂r/∂z per run and mode
+    Jg, gs = _viscosity_jacobians(problem, values, ctx)
+    p = Jg.shape[1]
+    # per-run sums over cells: reduceat over the runs that have cells (their starts increase)
+    filled = np.flatnonzero(np.diff(bounds) > 0)
     run_var = {}
-    start = 0
-    for c in CHANNELS:
-        if c not in ctx.observed:
-            continue
-        size = int(np.asarray(ctx.observed[c]).size)
-        if c in RUNNING_CHANNELS:
-            gc = g[start:start + n_cells]
-            Jg = J[start:start + n_cells] * gc[:, None]  # (cells, free)
-            w = np.asarray(ctx.weights[c])[:n_cells]
-            n_in = (w > 0) * w**2  # inlier count / σ_run²: the cell's weight in its run's mean
-            with np.errstate(invalid="ignore", divide="ignore"):
-                slope = np.where(w > 0, gc / w, 0.0)  # −∂prediction/∂μ (unweighted)
-            tot = np.bincount(problem.cell_run, weights=n_in, minlength=n_runs)
-            shift = np.zeros((n_runs, K))
-            for k in range(K):
-                if np.any(cell_modes[:, k]):
-                    for j in range(J.shape[1]):
-                        B[:, k, j] += np.bincount(problem.cell_run, weights=Jg[:, j] * cell_modes[:, k],
-                                                  minlength=n_runs)
-                    shift[:, k] = np.bincount(problem.cell_run, weights=n_in * slope * cell_modes[:, k],
-                                              minlength=n_runs)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                run_var[c] = np.where(tot > 0, np.sum(shift**2, axis=1) / np.maximum(tot, 1e-300) ** 2, 0.0)
-        start += size
-    A = B.reshape(-1, J.shape[1]) @ cov  # dβ/dz, one row per (run, mode)
+    for c, gc in gs.items():
+        w = np.asarray(ctx.weights[c])[:n_cells]
+        n_in = (w > 0) * w**2  # inlier count / σ_run²: the cell's weight in its run's mean
+        with np.errstate(invalid="ignore", divide="ignore"):
+            slope = np.where(w > 0, gc / w, 0.0)  # −∂prediction/∂μ (unweighted)
+        tot = np.bincount(problem.cell_run, weights=n_in, minlength=n_runs)
+        shift = np.zeros((n_runs, K))
+        shift[filled] = np.add.reduceat((n_in * slope)[:, None] * cell_modes, bounds[filled], axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            run_var[c] = np.where(tot > 0, np.sum(shift**2, axis=1) / np.maximum(tot, 1e-300) ** 2, 0.0)
+    # Jᵀ ∂r/∂z per run and mode: (modes of the run's cells)ᵀ · Jg of those cells
+    B = np.stack([cell_modes[bounds[r]:bounds[r + 1]].T @ Jg[bounds[r]:bounds[r + 1]] for r in smoothed]) \
+        if smoothed.size else np.zeros((0, K, p))
+    A = B.reshape(-1, p) @ cov  # dβ/dz, one row per (run, mode)
     out = A.T @ A
     return 0.5 * (out + out.T), run_var
 
