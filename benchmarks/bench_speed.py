@@ -10,9 +10,9 @@ truth.  Then, in one session on one machine:
    warm-up call, so that compile is excluded; the first call is reported too)
    against the baseline's ``fit()`` (pandas + numpy model + scipy
    least_squares with finite differences; its seconds exclude reading);
-2. end to end, process start to result.json: ``motorid fit`` twice (a fresh
-   compile cache for the first run, so the second run reads it) against the
-   baseline CLI twice;
+2. end to end, process start to result.json: ``motorid fit`` three times (a
+   fresh compile cache for the first run, so the later runs read it) against the
+   baseline CLI three times; a later run is the better of runs 2 and 3;
 3. ``motorid fit --bayes`` end to end, with the sampler's own figures;
 4. the parameters of both fits against the truth.
 
@@ -182,11 +182,14 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
     cache = tmp / "jax-cache"  # a fresh compile cache: run 1 compiles, run 2 reads the cache
     env = {**os.environ, "MOTORID_CACHE_DIR": str(cache)}
     fit_cmd = [py, "-m", "motorid", "fit", str(log), "--motor", str(MOTOR), "--out", str(tmp / "fit"), "--force"]
-    e2e = [_wall(fit_cmd, env)[0] for _ in range(2)]
+    e2e = [_wall(fit_cmd, env)[0] for _ in range(3)]
     doc = json.loads((tmp / "fit" / "result.json").read_text())
     base_cmd = [py, str(ROOT / "benchmarks" / "baseline.py"), str(log), "--motor", str(MOTOR),
                 "--out", str(tmp / "baseline.json")]
-    base_e2e = [_wall(base_cmd)[0] for _ in range(2)]
+    base_e2e = [_wall(base_cmd)[0] for _ in range(3)]
+    # a later run: the better of runs 2 and 3, for both (the machine is shared)
+    e2e = [e2e[0], min(e2e[1:])]
+    base_e2e = [base_e2e[0], min(base_e2e[1:])]
     startup_s = min(_wall([py, "-m", "motorid", "--help"])[0] for _ in range(2))
     print(f"   end to end: motorid {e2e[0]:.1f} / {e2e[1]:.1f} s, baseline {base_e2e[0]:.1f} / {base_e2e[1]:.1f} s",
           flush=True)
@@ -225,12 +228,12 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
         "|---|---:|---:|---:|---|",
         f"| fit step ≥ 10× faster (warm, compile excluded) | {fit_s:.2f} s | {base_fit_s:.2f} s | "
         f"{fit_ratio:.2f}× faster | {ok(fit_ratio >= 10)} |",
-        f"| `motorid fit` end to end ≤ ½ baseline wall time (second run) | {e2e[1]:.1f} s | {base_e2e[1]:.1f} s | "
+        f"| `motorid fit` end to end ≤ ½ baseline wall time (a later run) | {e2e[1]:.1f} s | {base_e2e[1]:.1f} s | "
         f"{e2e_ratio:.2f} of the baseline | {ok(e2e_ratio <= 0.5)} |",
         f"| Bayesian fit converged within 60 s (end to end) | {bayes_s:.1f} s, converged: {mcmc['converged']} | — | — "
         f"| {ok(bayes_s <= 60 and mcmc['converged'])} |",
         "",
-        f"The end-to-end goal needs ≤ {base_e2e[1] / 2:.2f} s. A second run neither traces nor compiles: "
+        f"The end-to-end goal needs ≤ {base_e2e[1] / 2:.2f} s. A later run neither traces nor compiles: "
         "the fit's compiled programs are kept on disk (`motorid._aot`, serialized XLA executables keyed by "
         "the motorid sources, the JAX version, the machine and the argument shapes), so it pays start-up "
         "and imports, reading, extraction and the fit itself.",
@@ -245,7 +248,7 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
         f"| fit step, warm | {fit_s:.2f} s ({ls.steps} LM steps, converged: {ls.converged}) | "
         f"{base_fit_s:.2f} s |",
         f"| end to end, first run (empty compile cache) | {e2e[0]:.1f} s | {base_e2e[0]:.1f} s |",
-        f"| end to end, second run | {e2e[1]:.1f} s | {base_e2e[1]:.1f} s |",
+        f"| end to end, a later run (better of runs 2 and 3) | {e2e[1]:.1f} s | {base_e2e[1]:.1f} s |",
         f"| of which process start + imports (`python -m motorid --help`) | {startup_s:.1f} s | — |",
         f"| of which the rest (loading the compiled programs, writing) | "
         f"{max(e2e[1] - startup_s - read_s - extract_s - fit_s, 0):.1f} s | — |",

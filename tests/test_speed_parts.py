@@ -171,3 +171,16 @@ def test_static_object_of_a_foreign_class_is_not_kept_on_disk(tmp_path, monkeypa
     assert not list(tmp_path.rglob("*.bin"))
     g(np.ones(3), "plain text")  # a plain static value: kept
     assert len(list(tmp_path.rglob("f-*.bin"))) == 1
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 20, 21, 22, 300])
+@pytest.mark.parametrize("window", [1, 3, 5, 21])
+def test_moving_median_matches_pandas_rolling_median(n, window):
+    import pandas as pd
+
+    rng = np.random.default_rng(n * 100 + window)
+    x = rng.standard_normal(n)
+    k = min(window, n) if min(window, n) % 2 else min(window, n) - 1
+    for xx in (x, np.where(rng.random(n) < 0.2, np.nan, x)):
+        want = pd.Series(xx).rolling(k, center=True, min_periods=1).median().to_numpy()
+        np.testing.assert_allclose(ex.moving_median(xx, k), want, equal_nan=True, rtol=0, atol=1e-15)

@@ -173,6 +173,21 @@ def _sustained(x: np.ndarray, length: int) -> np.ndarray:
     return out
 
 
+def moving_median(x, window: int) -> np.ndarray:
+    """Centred moving median over ``window`` (odd) samples, NaN skipped, windows cut
+    short at the ends (as pandas' ``rolling(window, center=True, min_periods=1).median()``)."""
+    x = np.asarray(x, dtype=float)
+    n, h = x.size, window // 2
+    if n == 0 or window <= 1:
+        return x.copy()
+    padded = np.concatenate([np.full(h, np.nan), x, np.full(h, np.nan)])
+    win = np.sort(np.lib.stride_tricks.sliding_window_view(padded, window), axis=1)  # NaN sorts last
+    count = window - np.isnan(win).sum(axis=1)
+    rows = np.arange(n)
+    lo, hi = win[rows, np.maximum(count - 1, 0) // 2], win[rows, np.maximum(count, 1) // 2]
+    return np.where(count > 0, 0.5 * (lo + hi), np.nan)
+
+
 def _median3(x: np.ndarray) -> np.ndarray:
     """Running median of three: removes isolated spikes, leaves monotone runs and corners as they are."""
     if x.size < 3:
@@ -210,7 +225,7 @@ def steady_state_mask(speed, dp, psum, settings: ExtractSettings = ExtractSettin
                            ("psum", psum, settings.pressure_floor)):
         if not np.isfinite(x).any():
             continue
-        smooth = pd.Series(x).rolling(window, center=True, min_periods=1).median().to_numpy()
+        smooth = moving_median(x, window)
         if smoothed is not None:
             smoothed[name] = smooth
         tail = smooth[n // 2:]
