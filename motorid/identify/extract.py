@@ -492,7 +492,14 @@ class Breakaway:
     onset_time [s]; direction ±1, the way the shaft breaks away; last_rest: index
     (into the arrays given) of the last sample still within the rest noise;
     rest_level [rad/s] and noise [rad/s]: the stuck speed's level and robust
-    deviation (at least half a quantization step).
+    deviation (at least half a quantization step).  acceleration [rad/s²]: the
+    growth rate of |speed| just after the onset, where the samples show it (NaN
+    elsewhere).  limited: where the first moving sample had already met a speed
+    limit W, (t₁ [s], Δθ₁/W [s], t₁ − t_rest [s], W [rad/s]): the time of that
+    sample, the angle it had turned over the limit speed, the interval since the
+    last sample at rest, and W; the onset then depends on the unseen time u_s the shaft took
+    to reach the limit, t₀ = t₁ − Δθ₁/W − u_s/2 (:func:`place_limited_onset`), and
+    ``onset_time`` takes the middle of the interval the angle allows.  None elsewhere.
     """
 
     onset_time: float
@@ -500,6 +507,8 @@ class Breakaway:
     last_rest: int
     rest_level: float
     noise: float
+    acceleration: float = math.nan
+    limited: tuple | None = None
 
 
 def _rest_level(t, w, line: bool, floor: float):
@@ -595,7 +604,7 @@ def _hinge_onset(t, dev, lo: int, last_rest: int, hi: int, noise: float = 0.0) -
     return t_quad if c_lin - c_quad > 10.83 * var else t_lin
 
 
-def _angle_onset(t, theta, dev, direction: float, last_rest: int, limit) -> float | None:
+def _angle_onset(t, theta, dev, direction: float, last_rest: int, limit) -> tuple | None:
     """Onset from the angle turned by the first moving samples, where the speed alone cannot place it.
 
     The angle is the integral of the speed, so it carries the time since the
@@ -612,7 +621,9 @@ def _angle_onset(t, theta, dev, direction: float, last_rest: int, limit) -> floa
       so u₁ lies between Δθ₁/W and 2 Δθ₁/W, and the middle of that interval is taken.
 
     u₁ is kept within the interval between the last rest sample and the first
-    moving one.  None where the angle gives nothing (no readings, no movement).
+    moving one.  Returns (t₀, a, limited) — a = ω₁/u₁ where the first moving
+    sample is below the limit (NaN on it), limited as :class:`Breakaway` has it —
+    or None where the angle gives nothing (no readings, no movement).
     """
     if theta is None:
         return None
@@ -635,12 +646,13 @@ def _angle_onset(t, theta, dev, direction: float, last_rest: int, limit) -> floa
         if not d1 > 0.0:
             return None
         lo, hi = min(d1 / limit, span), min(2.0 * d1 / limit, span)
-        return t1 - 0.5 * (lo + hi)
+        return t1 - 0.5 * (lo + hi), math.nan, (t1, d1 / limit, span, limit)
     use = [grow]
     if grow + 1 < t.size and dev[grow + 1] >= threshold and math.isfinite(theta[grow + 1]):
         use.append(grow + 1)
     if len(use) == 1:
-        return t1 - min(max(2.0 * turned(grow), 0.0) / w1, span)
+        u1 = min(max(2.0 * turned(grow), 0.0) / w1, span)
+        return t1 - u1, (w1 / u1 if u1 > 0 else math.nan), None
     obs = np.array([turned(k) for k in use])
     lag = np.array([float(t[k]) - t1 for k in use])
     u1 = np.linspace(0.0, span, 2001)[1:]
@@ -652,7 +664,21 @@ def _angle_onset(t, theta, dev, direction: float, last_rest: int, limit) -> floa
         best = int(np.argmin(((pred - obs[None, :]) ** 2).sum(1)))
         step = u1[1] - u1[0]
         u1 = np.linspace(max(u1[best] - step, 1e-3 * step), min(u1[best] + step, span), 201)
-    return t1 - float(u1[100])
+    return t1 - float(u1[100]), w1 / float(u1[100]), None
+
+
+def place_limited_onset(limited: tuple, acceleration: float) -> float:
+    """Onset of a breakaway whose first moving sample had already met the speed limit W,
+    given the acceleration a [rad/s²] with which the shaft left rest [s].
+
+    limited = (t₁, Δθ₁/W, span, W) of :class:`Breakaway`: the shaft reached W after
+    u_s = W/a and had turned Δθ₁ = W (u₁ − u_s/2) by t₁, so t₀ = t₁ − Δθ₁/W − u_s/2.
+    u_s is kept where the angle allows it (u_s ≤ u₁: at most 2 Δθ₁/W) and u₁
+    within the interval since the last sample at rest.
+    """
+    t1, turned_time, span, w_limit = limited
+    u_s = min(w_limit / acceleration, 2.0 * turned_time) if acceleration > 0 else turned_time
+    return t1 - min(turned_time + 0.5 * u_s, span)
 
 
 def find_breakaway(time, speed, rest_speed: float = 2e-3, theta=None) -> Breakaway:
@@ -671,8 +697,12 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3, theta=None) -> Breakaw
     growth samples remain (fast breakaway at a low sample rate), ``theta`` (shaft
     angle [rad], optional) places the onset by the angle turned by the first moving
     sample (:func:`_angle_onset`); without it the onset is the middle between the
-    last sample at rest and the first moving one.  Raises :class:`NoBreakaway` with
-    the reason when there is none.
+    last sample at rest and the first moving one.  Where that first moving sample
+    had already met the limit, the onset also depends on how long the shaft took
+    to reach it: the result's ``limited`` keeps what :func:`place_limited_onset`
+    needs once the acceleration is known (:func:`extract` takes it from the
+    campaign's other events).  Raises :class:`NoBreakaway` with the reason when
+    there is none.
     """
     t_all = np.asarray(time, dtype=float)
     w_all = np.asarray(speed, dtype=float)
@@ -721,16 +751,21 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3, theta=None) -> Breakaw
     limit = (float(limit), float(np.median(dev[grow + limited]))) if limited.size else None
     if limited.size:
         end = min(end, grow + int(limited[0]) - 1)
-    onset = None
+    onset, accel, on_limit = None, math.nan, None
     if end - last_rest >= 2:
         lo = max(0, last_rest + 1 - max(5, end - last_rest))
         onset = _hinge_onset(t, _median3(dev), lo, last_rest, end, noise)
+        u = t[grow:end + 1] - onset  # the growth rate: a line from the onset through the growth samples
+        accel = float(u @ dev[grow:end + 1] / (u @ u)) if np.all(u > 0) else math.nan
     elif grow < n:  # fewer than two growth samples: the angle turned by the first moving one
         th = None if theta is None else np.asarray(theta, dtype=float)[ok]
-        onset = _angle_onset(t, th, dev, direction, last_rest, limit)
+        placed = _angle_onset(t, th, dev, direction, last_rest, limit)
+        if placed is not None:
+            onset, accel, on_limit = placed
     if onset is None:  # the onset lies between the last sample at rest and the first moving one
         onset = 0.5 * float(t[last_rest] + t[min(grow, n - 1)])
-    return Breakaway(onset, direction, int(ok[last_rest]), float(base(np.array([onset]))[0]), noise)
+    return Breakaway(onset, direction, int(ok[last_rest]), float(base(np.array([onset]))[0]), noise,
+                     accel, on_limit)
 
 
 def value_at_onset(time, values, onset_time: float, count: int) -> float:
@@ -808,6 +843,80 @@ def _running_run(key, cols, settings, excluded, notes):
     return idx[steady], direction, ""
 
 
+def _event_at(t, cols, onset: float, direction: float) -> dict:
+    """A breakaway event of a startability run with its onset placed at ``onset`` [s]:
+    the port and case pressures there (a line through the readings before it), the
+    shaft angle, viscosity and temperature of the late stuck phase, and the held
+    load torque (median over the last half of the stuck phase)."""
+    stuck = np.flatnonzero(t < onset)
+    count = int(np.clip(stuck.size // 4, 8, 50))
+    window = stuck[-count:]
+    event = {"onset": onset, "direction": direction}
+    for c in ("p_a_Pa", "p_b_Pa", "p_case_Pa"):
+        event[c] = value_at_onset(t, cols[c], onset, count)
+    theta = cols["theta_rad"][window]
+    theta = theta[np.isfinite(theta)]
+    event["theta_rad"] = _circular_mean(theta) if theta.size else math.nan
+    event["viscosity_Pa_s"] = _median(cols["viscosity_Pa_s"][window])
+    event["oil_temp_C"] = _median(cols["oil_temp_C"][window])
+    torque = cols["torque_Nm"]
+    late = stuck[t[stuck] >= t[0] + 0.5 * (onset - t[0])]
+    if np.isfinite(torque[late]).sum() < 3:
+        late = stuck
+    event["held"] = _median(torque[late])
+    return event
+
+
+def _place_limited_onsets(events: list, pending: list) -> int:
+    """Onsets of the breakaways whose first moving sample had already met a speed limit → how many were placed.
+
+    Such an onset depends on the time u_s the shaft took to reach the limit, which
+    no sample saw (:func:`place_limited_onset`); the middle of what the angle allows
+    is late by up to a quarter sample where u_s is short.  Just after breakaway the
+    shaft accelerates at (static − kinetic friction)/(J_motor + J_load) =
+    (D (P_A + P_B) K_FS + T_Fc K_s)/J: a line in P_A + P_B (MODEL.md).  The events
+    whose growth the samples did show give |a| (:attr:`Breakaway.acceleration`);
+    a robust line of |a| against P_A + P_B over them (a constant where they are
+    fewer than five or at one pressure) gives each limited event its a, hence its
+    u_s = W/a and onset.  Fewer than three such events: the middles are kept.
+    ``pending``: (event, columns of its run) of the limited events, updated in place.
+    """
+    if not pending:
+        return 0
+    psum = np.array([e["p_a_Pa"] + e["p_b_Pa"] for e in events], dtype=float)
+    accel = np.abs(np.array([e["acceleration"] for e in events], dtype=float))
+    have = np.isfinite(psum) & np.isfinite(accel) & (accel > 0)
+    if have.sum() < 3:
+        return 0
+    x, y = psum[have], accel[have]
+    centre = float(np.median(x))
+    x = x - centre
+    if have.sum() >= 5 and np.ptp(x) > 0.1 * max(abs(centre), 1.0):
+        # Theil-Sen (median of the pairwise slopes: the events sit at a few loads, so a
+        # first cut on |a| alone would drop whole loads), then least squares on the events
+        # within 3.5 robust deviations of it
+        i, j = np.triu_indices(x.size, 1)
+        apart = x[j] != x[i]
+        slope = float(np.median((y[j] - y[i])[apart] / (x[j] - x[i])[apart]))
+        coef = np.array([slope, float(np.median(y - slope * x))])
+        r = y - np.polyval(coef, x)
+        keep = np.abs(r - np.median(r)) <= max(3.5 * _MAD * np.median(np.abs(r - np.median(r))), 1e-300)
+        if keep.sum() >= 3 and np.ptp(x[keep]) > 0:
+            coef = np.polyfit(x[keep], y[keep], 1)
+    else:
+        coef, _ = _robust_poly(x, y, 0)
+    placed = 0
+    for event, cols in pending:
+        b = event["breakaway"]
+        a = float(np.polyval(coef, event["p_a_Pa"] + event["p_b_Pa"] - centre))
+        if not (math.isfinite(a) and a > 0):
+            continue
+        onset = place_limited_onset(b.limited, a)
+        event.update(_event_at(cols["time_s"], cols, onset, b.direction))
+        placed += 1
+    return placed
+
+
 def _startability_run(key, cols, settings, excluded, notes):
     """Breakaway event of one startability run → (dict of the event or None, why not)."""
     t = cols["time_s"]
@@ -832,27 +941,12 @@ def _startability_run(key, cols, settings, excluded, notes):
             end = t[-1] + 1.0 if b is None else b.onset_time
             raise NoBreakaway(f"the shaft is already turning at the start of the run (the shaft angle moved "
                               f"{turned(end):.3g} rad while the speed seemed at rest)")
-        stuck = np.flatnonzero(t < b.onset_time)
     except NoBreakaway as exc:
         excluded[NO_BREAKAWAY] = excluded.get(NO_BREAKAWAY, 0) + 1
         notes.append(f"run {key}: no breakaway found, {exc}")
         return None, "no breakaway found"
-    count = int(np.clip(stuck.size // 4, 8, 50))
-    window = stuck[-count:]
-    event = {"onset": b.onset_time, "direction": b.direction}
-    for c in ("p_a_Pa", "p_b_Pa", "p_case_Pa"):
-        event[c] = value_at_onset(t, cols[c], b.onset_time, count)
-    theta = cols["theta_rad"][window]
-    theta = theta[np.isfinite(theta)]
-    event["theta_rad"] = _circular_mean(theta) if theta.size else math.nan
-    event["viscosity_Pa_s"] = _median(cols["viscosity_Pa_s"][window])
-    event["oil_temp_C"] = _median(cols["oil_temp_C"][window])
-    # held load torque: median over the last half of the stuck phase
-    torque = cols["torque_Nm"]
-    late = stuck[t[stuck] >= t[0] + 0.5 * (b.onset_time - t[0])]
-    if np.isfinite(torque[late]).sum() < 3:
-        late = stuck
-    event["held"] = _median(torque[late])
+    event = _event_at(t, cols, b.onset_time, b.direction)
+    event["acceleration"], event["breakaway"] = b.acceleration, b
     if not math.isfinite(event["held"]):
         excluded[NO_HELD_TORQUE] = excluded.get(NO_HELD_TORQUE, 0) + 1
         notes.append(f"run {key}: breakaway at t = {b.onset_time:.4g} s but no torque reading while stuck")
@@ -893,7 +987,7 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
     excluded: dict = {}
     notes: list = []
     rows, picks, accel, run_of_sample, directions, events = [], [], [], [], [], []
-    visc = []
+    visc, pending = [], []
     n_runs = len(uniques)
     visc_center, visc_half = np.zeros(n_runs), np.ones(n_runs)
     visc_factor = np.zeros((n_runs, VISCOSITY_MODES, VISCOSITY_MODES))
@@ -911,7 +1005,9 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
             if event is not None:
                 event["run"], event["run_index"] = key, r
                 events.append(event)
-                row.update(direction=event["direction"], onset_time_s=event["onset"])
+                row.update(direction=event["direction"])
+                if event["breakaway"].limited is not None:
+                    pending.append((event, cols))
         elif protocol in RUNNING_PROTOCOLS:
             chosen, direction, why = _running_run(key, cols, settings, excluded, notes)
             row.update(direction=direction, excluded=why)
@@ -940,6 +1036,9 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
                    psum_median_Pa=_median(p_a + p_b), temp_median_C=_median(cols["oil_temp_C"][used]))
         rows.append(row)
 
+    _place_limited_onsets(events, pending)
+    for e in events:
+        rows[e["run_index"]]["onset_time_s"] = e["onset"]
     runs = pd.DataFrame(rows, columns=["run", "protocol", "file", "n_samples", "n_steady",
                                        "speed_median_rad_s", "dp_median_Pa", "psum_median_Pa",
                                        "temp_median_C", "direction", "onset_time_s", "excluded",
