@@ -258,3 +258,44 @@ def test_shaft_locked_speed_ripple_gives_its_true_acceleration_even_when_aliased
     # less than two revolutions: the plain derivative
     assert np.array_equal(running_acceleration(t[:40], speed[:40], np.full(40, 0.1), steady[:40]),
                           smoothed_acceleration(t[:40], speed[:40]))
+
+
+def test_shaft_ripple_where_two_orders_alias_onto_one_frequency():
+    """1000 rpm at 50 Hz: θ steps 120° a sample, so cos 2θ and cos θ read alike; the
+    first order is kept and the second, folded onto it, left out (the fit of both is
+    singular; it used to fall back to the plain derivative, off by the whole ripple)."""
+    from motorid.identify.extract import running_acceleration, smoothed_acceleration
+
+    rng = np.random.default_rng(2)
+    w0, amp, rate = 1000 * 2 * np.pi / 60, 0.3, 50.0
+    t = np.arange(300) / rate
+    theta = w0 * t + 0.4
+    speed = w0 + amp * np.cos(theta) + 0.005 * rng.standard_normal(t.size)
+    true_acc = -amp * np.sin(theta) * w0
+    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
+    rms = np.sqrt(np.mean(true_acc**2))
+    inner = slice(5, -5)
+    assert np.sqrt(np.mean((got - true_acc)[inner] ** 2)) < 0.05 * rms
+    assert np.sqrt(np.mean((smoothed_acceleration(t, speed) - true_acc)[inner] ** 2)) > 0.5 * rms
+
+
+def test_shaft_ripple_is_resolved_under_a_slow_speed_wander():
+    """A dynamometer's speed controller wanders slowly (here 2 Hz, three times the ripple's
+    amplitude): what the trend leaves of it raises the misfit, and the ripple, though
+    plainly there, no longer passed a strict F test (F ≈ 20 here against 30); it must be kept."""
+    from motorid.identify.extract import running_acceleration, smoothed_acceleration
+
+    rng = np.random.default_rng(4)
+    w0, amp, rate = 2500 * 2 * np.pi / 60, 0.2, 50.0
+    t = np.arange(100) / rate
+    theta = w0 * t + 1.1
+    wander = 0.6 * np.sin(2 * np.pi * 2.0 * t + 0.5) + 0.1 * rng.standard_normal(t.size).cumsum() / 3
+    speed = w0 + wander + amp * np.cos(theta) + 0.13 * rng.standard_normal(t.size)
+    ripple_acc = -amp * np.sin(theta) * w0
+    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
+    plain = smoothed_acceleration(t, speed)
+    inner = slice(5, -5)
+    # what is left is the wander's own slow acceleration and the noise, not the ripple
+    err = np.sqrt(np.mean((got - ripple_acc - smoothed_acceleration(t, w0 + wander))[inner] ** 2))
+    err_plain = np.sqrt(np.mean((plain - ripple_acc - smoothed_acceleration(t, w0 + wander))[inner] ** 2))
+    assert err < 0.35 * np.sqrt(np.mean(ripple_acc**2)) < err_plain

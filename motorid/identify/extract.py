@@ -288,6 +288,13 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
     return out / scale
 
 
+#: least F statistic of a shaft order of the speed ripple that running_acceleration keeps:
+#: 2, Akaike's (an order's two coefficients must lower the misfit by more than two
+#: residual variances each); a stricter test (30 before) left real ripples of fast
+#: runs unresolved where the dynamometer's slow speed wander raised the residual
+RIPPLE_F = 2.0
+
+
 def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1, 2)) -> np.ndarray:
     """dω/dt of a steady run with any speed ripple locked to the shaft angle resolved [rad/s²].
 
@@ -300,10 +307,11 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
     half the revolutions turned, 2 to 10: smooth over a revolution, so the two
     parts do not mix); the derivative of sampled speed is taken of the rest, and
     the ripple's own derivative, ω Σₖ k(bₖ cos kθ − aₖ sin kθ), is added back
-    exactly.  Only the orders that are significant are kept (each must raise the
-    fit's F statistic by 30 or more; an order fitted to noise would add that
-    noise back k·ω times amplified); the plain derivative is returned where none
-    is, the run turns less than two revolutions, or the fit is ill-conditioned.
+    exactly.  Orders are taken lowest first, each kept where it lowers the misfit
+    by F ≥ :data:`RIPPLE_F` and the sampling does not fold it onto an order
+    already kept (an order fitted to noise adds that noise back k·ω times
+    amplified; a real ripple left out adds itself); the plain derivative is
+    returned where none is kept or the run turns less than two revolutions.
     """
     t = np.asarray(time, dtype=float)
     w = np.asarray(speed, dtype=float)
@@ -335,18 +343,19 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
         coef = np.linalg.solve(g, xty[cols])
         return coef, max(yy - float(coef @ xty[cols]), 0.0), sel.size - cols.size, cond
 
-    # keep only the orders that are there: an order fitted to noise would add its noise
-    # back amplified k·ω times through the derivative
-    kept = list(orders)
-    while kept:
-        coef, rss, dof, cond = fit(kept)
-        if dof < 20 or cond > 1e8 or rss <= 0:
-            return plain
-        f_drop = [((fit([j for j in kept if j != k])[1] - rss) / 2.0) / (rss / dof) for k in kept]
-        worst = int(np.argmin(f_drop))
-        if f_drop[worst] >= 30.0:
-            break
-        kept.pop(worst)
+    # orders taken one at a time, lowest first: one that the sampling folds onto an order
+    # already kept (at 1000 rpm and 50 Hz orders 1 and 2 alias to one frequency) is left
+    # out, as is one that does not lower the misfit by F ≥ RIPPLE_F (an order fitted to
+    # noise adds its noise back amplified k·ω times through the derivative; a real ripple
+    # left out puts all of itself, k·ω times, into the acceleration)
+    coef, rss_kept, _, _ = fit([])
+    kept = []
+    for k in sorted(orders):
+        c, rss, dof, cond = fit(kept + [k])
+        if c is None or dof < 20 or cond > 1e6 or not rss > 0:
+            continue
+        if ((rss_kept - rss) / 2.0) / (rss / dof) >= RIPPLE_F:
+            kept, coef, rss_kept = kept + [k], c, rss
     if not kept:
         return plain
     a, b = coef[trend.shape[1]::2], coef[trend.shape[1] + 1::2]
