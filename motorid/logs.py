@@ -102,12 +102,12 @@ _PSI = 6894.757293168361  # Pa per lbf/in²
 _US_GALLON = 3.785411784e-3  # m³
 _LBF_FT = 1.3558179483314004  # N·m per lbf·ft
 
-_TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "min": 60.0}
+_TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "min": 60.0, "h": 3600.0}
 _ANGLE_UNITS = {"rad": 1.0, "deg": np.pi / 180.0, "degree": np.pi / 180.0, "degrees": np.pi / 180.0,
                 "rev": 2.0 * np.pi}
 _SPEED_UNITS = {"rad_s": 1.0, "rpm": 2.0 * np.pi / 60.0, "rev_min": 2.0 * np.pi / 60.0,
                 "r_min": 2.0 * np.pi / 60.0, "1_min": 2.0 * np.pi / 60.0, "deg_s": np.pi / 180.0,
-                "rps": 2.0 * np.pi, "rev_s": 2.0 * np.pi}
+                "rps": 2.0 * np.pi, "rev_s": 2.0 * np.pi, "hz": 2.0 * np.pi}
 _TORQUE_UNITS = {"nm": 1.0, "n_m": 1.0, "knm": 1e3, "kn_m": 1e3, "lbf_ft": _LBF_FT, "ft_lbf": _LBF_FT,
                  "lbf_in": _LBF_FT / 12.0, "in_lbf": _LBF_FT / 12.0}
 _PRESSURE_UNITS = {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5, "barg": 1e5, "bar_g": 1e5,
@@ -115,7 +115,8 @@ _PRESSURE_UNITS = {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5, "barg": 1e5, "
 _FLOW_UNITS = {"m3_s": 1.0, "m3_h": 1.0 / 3600.0, "l_s": 1e-3, "lps": 1e-3, "lpm": 1e-3 / 60.0,
                "l_min": 1e-3 / 60.0, "ml_s": 1e-6, "ml_min": 1e-6 / 60.0, "cm3_s": 1e-6,
                "cm3_min": 1e-6 / 60.0, "cc_min": 1e-6 / 60.0, "gpm": _US_GALLON / 60.0,
-               "usgpm": _US_GALLON / 60.0, "gal_min": _US_GALLON / 60.0}
+               "usgpm": _US_GALLON / 60.0, "gal_min": _US_GALLON / 60.0, "m3_min": 1.0 / 60.0,
+               "l_h": 1e-3 / 3600.0, "lph": 1e-3 / 3600.0, "dm3_min": 1e-3 / 60.0, "dm3_s": 1e-3}
 _TEMPERATURE_UNITS = {"c": lambda x: x, "degc": lambda x: x, "celsius": lambda x: x,
                       "k": lambda x: x - 273.15, "kelvin": lambda x: x - 273.15,
                       "f": lambda x: (x - 32.0) * 5.0 / 9.0, "degf": lambda x: (x - 32.0) * 5.0 / 9.0}
@@ -166,6 +167,10 @@ def normalize_header(name: str) -> str:
     s = re.sub(r"(?<=[a-z0-9])\.(?=[a-z])", "", s)  # "N.m", "mPa.s"
     s = re.sub(r"[\s/\\()\[\]{}\-,;:]+", "_", s)
     return re.sub(r"_+", "_", s).strip("_")
+
+
+# the column each quantity has in BENCH_LOG_FORMAT.md (normalized)
+_FORMAT_HEADER = {q.si: normalize_header(q.example) for q in _QUANTITIES}
 
 
 def _unit_hint(norm: str):
@@ -244,7 +249,16 @@ def _map_columns(path: Path, fields: list):
             other = fields[found[key][0]]
             if normalize_header(other) == norm:
                 raise InputError(f"{path}: column '{name}' appears twice (also as '{other}')")
-            raise InputError(f"{path}: columns '{other}' and '{name}' both give the {words}; keep one")
+            # the format's own column wins; a copy of its quantity in another unit is an extra
+            # column, kept and ignored (BENCH_LOG_FORMAT.md); two copies, neither of them the
+            # format's, are ambiguous
+            if norm == _FORMAT_HEADER.get(key):
+                extras[found[key][0]] = other
+            elif normalize_header(other) == _FORMAT_HEADER.get(key):
+                extras[j] = name
+                continue
+            else:
+                raise InputError(f"{path}: columns '{other}' and '{name}' both give the {words}; keep one")
         found[key] = (j, unit)
     missing = [k for k in ("time_s", "run_id", "protocol", *_REQUIRED[1:]) if k not in found]
     if missing:

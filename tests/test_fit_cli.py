@@ -134,3 +134,17 @@ def test_process_exit_status_and_no_traceback(tmp_path):
     assert r.returncode == 2
     assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert "x.csv" in r.stderr
+
+
+def test_startability_runs_alone_give_reasons_not_a_crash(tmp_path, capsys):
+    """A campaign of breakaway tests only: the fit has no running samples at all; every
+    parameter gets its reason (the static friction is measured against the running one)."""
+    df = pd.read_csv(DEMO / "campaign.csv.gz")
+    log = tmp_path / "startability.csv"
+    df[df["protocol"] == "startability"].to_csv(log, index=False)
+    rc, out, err = _fit([log, "--motor", MOTOR, "--out", tmp_path / "r"], capsys)
+    assert rc == 0, err
+    doc = json.loads((tmp_path / "r" / "result.json").read_text())
+    params = doc["parameters"]
+    assert not any(p["identifiable"] for p in params.values())
+    assert "running" in params["KF"]["reason"] and "K_F" in params["KFS"]["reason"]

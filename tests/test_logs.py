@@ -108,6 +108,17 @@ def test_other_units_are_converted_to_si(tmp_path):
     assert list(f["operator"]) == ["ann", "ann"]  # extra column kept
 
 
+def test_more_units_of_flow_time_and_speed(tmp_path):
+    header = (HEADER.replace("q_a_lpm", "q_a_l_h").replace("q_b_lpm", "q_b_m3_min").replace("q_case_lpm", "q_case_dm3_min")
+              .replace("time_s", "time_us").replace("speed_rpm", "speed_Hz"))
+    f = logs.read_log(write(tmp_path, good_text(header, ROWS)))
+    np.testing.assert_allclose(f["q_a_m3_s"].iloc[0], 5e-3 / 3600)
+    np.testing.assert_allclose(f["q_b_m3_s"].iloc[0], -4.9 / 60)
+    np.testing.assert_allclose(f["q_case_m3_s"].iloc[0], 0.1e-3 / 60)
+    np.testing.assert_allclose(f["time_s"].iloc[:3], [0.0, 1e-7, 2e-7])
+    np.testing.assert_allclose(f["speed_rad_s"].iloc[0], 60 * 2 * np.pi)
+
+
 def test_extra_columns_may_repeat_and_are_ignored(tmp_path):
     f = logs.read_log(write(tmp_path, good_text(HEADER + ",note,note", [r + ",a,b" for r in ROWS])))
     assert list(f["note"]) == ["a"] * len(ROWS) and list(f["note.16"]) == ["b"] * len(ROWS)
@@ -241,11 +252,22 @@ def test_binary_and_unreadable_files(tmp_path):
     assert "nowhere.csv" in one_line(exc) and "cannot read" in str(exc.value)
 
 
+def test_a_copy_in_another_unit_beside_the_formats_column_is_an_extra_column(tmp_path):
+    """BENCH_LOG_FORMAT.md: extra columns are kept and ignored; the format's own column wins,
+    wherever it stands."""
+    for header, rows in ((HEADER + ",p_a_psi,time_ms", [r + ",1450,7" for r in ROWS]),
+                         ("p_a_psi," + HEADER, ["1450," + r for r in ROWS])):
+        f = logs.read_log(write(tmp_path, good_text(header, rows), "copy.csv"))
+        np.testing.assert_allclose(f["p_a_Pa"].iloc[:3], [100e5, 101e5, 102e5])
+        np.testing.assert_allclose(f["time_s"].iloc[:3], [0.0, 0.1, 0.2])
+        assert [float(x) for x in f["p_a_psi"]] == [1450.0] * len(ROWS)  # kept as read
+
+
 def test_same_quantity_in_two_units_names_both_columns(tmp_path):
-    header = HEADER + ",p_a_psi"
+    header = HEADER.replace("p_a_bar", "p_a_kPa") + ",p_a_psi"
     rows = [r + ",1450" for r in ROWS]
     msg = bad(tmp_path, good_text(header, rows))
-    assert "'p_a_bar'" in msg and "'p_a_psi'" in msg
+    assert "'p_a_kPa'" in msg and "'p_a_psi'" in msg
     msg = bad(tmp_path, good_text(HEADER + ", P_A_BAR ", [r + ",100" for r in ROWS]), "twice.csv")
     assert "p_a_bar" in msg.lower() and "twice" in msg
 
@@ -280,7 +302,7 @@ def test_cli_turns_a_bad_log_into_exit_status_2(tmp_path, capsys):
 
     spec = tmp_path / "motor.toml"
     spec.write_text(SPEC.to_toml())
-    log = write(tmp_path, good_text(HEADER.replace("torque_Nm", "torque_Nm,torque_kNm"),
+    log = write(tmp_path, good_text(HEADER.replace("torque_Nm", "torque_lbf_ft,torque_kNm"),
                                     [_insert(r, 6, "0.05") for r in ROWS]), "twotorques.csv")
     assert main(["fit", str(log), "--motor", str(spec), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err

@@ -517,6 +517,7 @@ class _Problem:
         self.measured = {c: np.asarray(data.measured[c], dtype=float) for c in RUNNING_CHANNELS} if self.has_running else {}
         self.held_torque = np.asarray(data.held_torque, dtype=float) if self.has_events else np.zeros(0)
         self.run_of = np.asarray(data.run_of_sample, dtype=int) if self.has_running else np.zeros(0, int)
+        self.n_samples, self.n_cells = 0, 0
         if self.has_running:
             bins = bins_per_pitch * spec.pistons
             theta = np.mod(np.asarray(data.running.theta), 2 * np.pi)
