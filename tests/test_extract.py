@@ -299,3 +299,36 @@ def test_shaft_ripple_is_resolved_under_a_slow_speed_wander():
     err = np.sqrt(np.mean((got - ripple_acc - smoothed_acceleration(t, w0 + wander))[inner] ** 2))
     err_plain = np.sqrt(np.mean((plain - ripple_acc - smoothed_acceleration(t, w0 + wander))[inner] ** 2))
     assert err < 0.35 * np.sqrt(np.mean(ripple_acc**2)) < err_plain
+
+
+def test_spikes_in_input_readings_leave_their_samples_out():
+    """A spike in a pressure or speed reading would move its cell's model (the fit averages
+    the inputs of a cell over all its samples); the sample is left out and counted."""
+    frame = running_run("R", 5.0, rate=100.0, duration=20.0, noise=1e-3, seed=3)
+    clean = ex.extract(frame, SPEC)
+    rng = np.random.default_rng(8)
+    hit = rng.choice(np.arange(600, 1900), 12, replace=False)
+    spiky = frame.copy()
+    spiky.loc[hit[:6], "p_a_Pa"] += 40e5
+    spiky.loc[hit[6:9], "speed_rad_s"] *= 3.0
+    spiky.loc[hit[9:], "p_case_Pa"] -= 3e5
+    d = ex.extract(spiky, SPEC)
+    assert d.excluded[ex.INPUT_SPIKE] == 12
+    assert set(hit).isdisjoint(d.frame_index)
+    assert d.n_running == clean.n_running - 12
+    assert ex.INPUT_SPIKE not in clean.excluded
+    # the speed's derivative is bridged over the spikes, not thrown by them
+    keep = np.isin(clean.frame_index, d.frame_index)
+    np.testing.assert_allclose(np.asarray(d.running.acceleration), np.asarray(clean.running.acceleration)[keep],
+                               atol=0.05)
+
+
+def test_input_spikes_leave_ripple_quantization_and_noise_alone():
+    rng = np.random.default_rng(0)
+    t = np.arange(3000) / 50.0
+    assert not ex.input_spikes(100 + 5 * np.sin(2 * np.pi * 7 * t) + 0.01 * rng.standard_normal(t.size)).any()
+    assert not ex.input_spikes(np.round(100 + 0.3 * rng.standard_normal(t.size))).any()
+    assert sum(ex.input_spikes(rng.standard_normal(500)).sum() for _ in range(200)) == 0
+    x = rng.standard_normal(500)
+    x[[0, 10, 11, 200, 499]] += 30.0
+    assert list(np.flatnonzero(ex.input_spikes(x))) == [0, 10, 11, 200, 499]

@@ -35,6 +35,7 @@ _INPUTS = ("theta_rad", "speed_rad_s", "p_a_Pa", "p_b_Pa", "p_case_Pa", "viscosi
 
 # keys of Dataset.excluded
 MISSING_INPUT = "samples with a missing input channel"
+INPUT_SPIKE = "samples with a spike in an input channel"
 START_TRANSIENT = "start-transient samples"
 UNSTEADY = "unsteady samples after the start"
 NO_STEADY_SPEED = "samples with no steady speed"
@@ -186,6 +187,56 @@ def moving_median(x, window: int) -> np.ndarray:
     rows = np.arange(n)
     lo, hi = win[rows, np.maximum(count - 1, 0) // 2], win[rows, np.maximum(count, 1) // 2]
     return np.where(count > 0, 0.5 * (lo + hi), np.nan)
+
+
+def _window_median(windows: np.ndarray) -> np.ndarray:
+    """Median of the finite values of each row (NaN where a row has none)."""
+    w = np.sort(windows, axis=1)  # NaN last
+    count = w.shape[1] - np.isnan(w).sum(axis=1)
+    rows = np.arange(w.shape[0])
+    lo, hi = w[rows, np.maximum(count - 1, 0) // 2], w[rows, np.maximum(count, 1) // 2]
+    return np.where(count > 0, 0.5 * (lo + hi), np.nan)
+
+
+def input_spikes(x, k: float = 6.0, half: int = 3) -> np.ndarray:
+    """Isolated readings of one run's input channel → boolean mask (a Hampel filter).
+
+    The fit averages a cell's inputs (pressures, speed, viscosity) over all its
+    samples, and each output channel over its own inliers; a spike in an input
+    moves its cell's model by δ/N — N·m on cells whose noise is hundredths, and no
+    residual test of an output shows it.  A reading is a spike where it stands
+    more than ``k`` deviations from the median of the 2·``half`` + 1 readings
+    around it; the deviation is the larger of the window's own MAD (ripple, steps
+    and transients widen it) and the run's: the MAD of each reading against the
+    median of its four neighbours (itself left out: against a median that holds it,
+    a reading is so often the median itself that the MAD collapses to zero), the
+    scaled spread of their central 80 % (readings on one quantization level) and
+    the quantization step.  Two spikes in a row are still found.  NaN readings are
+    never spikes.
+    """
+    x = np.asarray(x, dtype=float)
+    out = np.zeros(x.size, bool)
+    ok = np.flatnonzero(np.isfinite(x))
+    if ok.size < 2 * half + 4:
+        return out
+    v = x[ok]
+    view = np.lib.stride_tricks.sliding_window_view
+    pad2 = np.concatenate([[np.nan] * 2, v, [np.nan] * 2])
+    r = v - _window_median(view(pad2, 5)[:, [0, 1, 3, 4]])
+    centre = float(np.median(r))
+    mad = _MAD * float(np.median(np.abs(r - centre)))
+    lo, hi = np.percentile(r, [10.0, 90.0])
+    central = r[(r >= lo) & (r <= hi)]
+    trimmed = 1.51 * float(central.std()) if central.size >= 5 else 0.0
+    levels, counts = np.unique(v, return_counts=True)
+    frequent = levels[counts >= max(3, 0.02 * v.size)]  # the levels readings keep returning to
+    quantum = float(np.diff(frequent).min()) if frequent.size >= 2 else 0.0
+    floor = max(mad, trimmed, quantum, 1e-9 * float(np.max(np.abs(v))), 1e-300)
+    windows = view(np.concatenate([[np.nan] * half, v, [np.nan] * half]), 2 * half + 1)
+    med = _window_median(windows)
+    local = _MAD * _window_median(np.abs(windows - med[:, None]))
+    out[ok] = np.abs(v - med) > k * np.maximum(local, floor)
+    return out
 
 
 def _median3(x: np.ndarray) -> np.ndarray:
@@ -835,6 +886,17 @@ def _running_run(key, cols, settings, excluded, notes):
                      f"below {settings.rest_speed:g} rad/s)")
         return None, 0.0, "no steady speed"
     direction = float(np.sign(median_speed))
+    # a spike in an input reading: the sample is left out (and bridged in the speed's derivative)
+    spikes = np.zeros(n, bool)
+    for c in ("speed_rad_s", "p_a_Pa", "p_b_Pa", "p_case_Pa", "viscosity_Pa_s"):
+        hit = input_spikes(cols[c]) & valid
+        if hit.any():
+            cols[c] = np.where(hit, np.nan, cols[c])
+            spikes |= hit
+    if spikes.any():
+        excluded[INPUT_SPIKE] = excluded.get(INPUT_SPIKE, 0) + int(spikes.sum())
+        valid &= ~spikes
+    speed = cols["speed_rad_s"]
     p_a, p_b = cols["p_a_Pa"], cols["p_b_Pa"]
     idx = np.flatnonzero(valid)
     smoothed: dict = {}
