@@ -741,6 +741,104 @@ def place_limited_onset(limited: tuple, acceleration: float) -> float:
     return t1 - min(turned_time + 0.5 * u_s, span)
 
 
+ANGLE_STEP = math.radians(0.01)  # shaft-angle reading step assumed where the readings do not show one [rad]
+
+
+def _turned_since_rest(theta, direction: float, last_rest: int, idx) -> np.ndarray | None:
+    """Angle the shaft turned in the direction of motion since rest, at samples ``idx``
+    after ``last_rest`` [rad] (rest: the median of the last ten readings at rest), and the
+    angle's reading step [rad] → (turned, step); None where the readings give nothing."""
+    if theta is None:
+        return None
+    idx = np.atleast_1d(np.asarray(idx, dtype=int))
+    rest = np.arange(max(0, last_rest - 9), last_rest + 1)
+    rest = rest[np.isfinite(theta[rest])]
+    if rest.size == 0 or idx.size == 0 or not np.all(np.isfinite(theta[idx])):
+        return None
+    ref = float(theta[rest[-1]])
+    level = ref + float(np.median(np.remainder(theta[rest] - ref + np.pi, 2 * np.pi) - np.pi))
+    turned = direction * (np.unwrap(np.r_[level, theta[idx]])[1:] - level)
+    # the reading step: at most the smallest gap between the distinct angles read in the run,
+    # and taken as 0.01° (an encoder's or resolver's) where the readings do not show one
+    gaps = np.diff(np.unique(np.mod(theta[np.isfinite(theta)], 2 * np.pi)))
+    step = min(float(gaps.min()) if gaps.size else math.inf, ANGLE_STEP)
+    return turned, step
+
+
+def _angle_agrees(t, theta, dev, direction: float, last_rest: int, onset: float) -> bool:
+    """Does an onset agree with the angle the first moving sample had turned?
+
+    A speed that rose from 0 at t₀ to ω₁ at t₁ as u^p (p = 0: a jump, 1: linear, 2:
+    quadratic) turned the shaft Δθ₁ = ω₁ u₁/(1 + p), u₁ = t₁ − t₀; growth between a
+    jump and a quadratic puts u₁ between Δθ₁/ω₁ and 3 Δθ₁/ω₁ (a fifth and three
+    reading steps of slack; the step is taken no larger than Δθ₁).  True where the
+    angle cannot tell."""
+    grow = last_rest + 1
+    got = _turned_since_rest(theta, direction, last_rest, grow)
+    w1 = float(dev[grow])
+    if got is None or not w1 > 0:
+        return True
+    (d1,), step = got
+    if not d1 > 0:
+        return True
+    step = min(step, d1)  # a nonzero reading has turned at least one step
+    u1 = float(t[grow]) - onset
+    return 0.8 * (d1 - 3 * step) / w1 <= u1 <= 1.2 * (3.0 * d1 + 3 * step) / w1
+
+
+def _lag_onset(t, dev, theta, direction: float, last_rest: int, stop: int, noise: float) -> float | None:
+    """Onset from the first moving samples' speed and angle, with a growth of any speed of response.
+
+    After breakaway the shaft's speed follows a first-order lag and goes on rising
+    with the load, ω = V (1 − e^(−u/τ)) + r u, u = t − t₀ (a load with damping; V = 0
+    is the linear growth of an undamped one, small τ a jump), and the angle its
+    integral, θ − θ_rest = V (u − τ (1 − e^(−u/τ))) + r u²/2.  The speed and angle of
+    up to three moving samples (before ``stop``) are fitted for t₀ (between the last
+    sample at rest and the first moving one), τ (a log grid) and V, r ≥ 0 (least
+    squares), the speed weighted by its rest noise, the angle by its reading step.
+    None where the angle gives nothing.
+    """
+    grow = last_rest + 1
+    use = np.arange(grow, min(grow + 3, stop + 1, t.size))
+    got = _turned_since_rest(theta, direction, last_rest, use) if use.size >= 2 else None
+    if got is None:
+        return None
+    turned, step = got
+    if not (turned[0] > 0 and np.all(np.diff(np.r_[0.0, turned]) < np.pi)):
+        return None
+    s_theta = max(min(step, turned[0]) / math.sqrt(12.0), 1e-9)
+    s_speed = max(noise, 1e-12)
+    t_lr, t1 = float(t[last_rest]), float(t[grow])
+    t0 = np.linspace(t_lr, t1, 402)[:-1]
+    u = np.maximum(t[use][None, :] - t0[:, None], 0.0)  # (t0, samples)
+    span = t1 - t_lr
+    y = np.r_[dev[use] / s_speed, turned / s_theta]
+    ramp = np.concatenate([u / s_speed, 0.5 * u * u / s_theta], axis=1)  # a speed rising on with the load
+    best, cost = None, math.inf
+    for tau in span * np.logspace(-3.0, 3.0, 61):
+        f = -np.expm1(-u / tau)
+        lag = np.concatenate([f / s_speed, (u - tau * f) / s_theta], axis=1)  # (t0, 2 K)
+        # least squares in (V, r) for every t0 at once: 2 × 2 normal equations
+        a11, a12, a22 = (lag * lag).sum(1), (lag * ramp).sum(1), (ramp * ramp).sum(1)
+        b1, b2 = lag @ y, ramp @ y
+        det = a11 * a22 - a12 * a12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            V = np.where(det > 0, (a22 * b1 - a12 * b2) / det, -1.0)
+            r = np.where(det > 0, (a11 * b2 - a12 * b1) / det, -1.0)
+            # V, r ≥ 0: where the pair is not, the better of each alone (the problem is convex)
+            V_only, r_only = np.maximum(b1 / a11, 0.0), np.maximum(b2 / a22, 0.0)
+        both = (V >= 0) & (r >= 0)
+        c_both = ((y[None, :] - V[:, None] * lag - r[:, None] * ramp) ** 2).sum(1)
+        c_V = ((y[None, :] - V_only[:, None] * lag) ** 2).sum(1)
+        c_r = ((y[None, :] - r_only[:, None] * ramp) ** 2).sum(1)
+        c = np.where(both, c_both, np.minimum(c_V, c_r))
+        c = np.where(np.isfinite(c), c, np.inf)
+        k = int(np.argmin(c))
+        if c[k] < cost:
+            best, cost = float(t0[k]), float(c[k])
+    return best
+
+
 def find_breakaway(time, speed, rest_speed: float = 2e-3, theta=None) -> Breakaway:
     """Find the instant a startability run's speed leaves rest.
 
@@ -812,16 +910,36 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3, theta=None) -> Breakaw
     if limited.size:
         end = min(end, grow + int(limited[0]) - 1)
     onset, accel, on_limit = None, math.nan, None
+    th = None if theta is None else np.asarray(theta, dtype=float)[ok]
     if end - last_rest >= 2:
         lo = max(0, last_rest + 1 - max(5, end - last_rest))
         onset = _hinge_onset(t, _median3(dev), lo, last_rest, end, noise)
         u = t[grow:end + 1] - onset  # the growth rate: a line from the onset through the growth samples
         accel = float(u @ dev[grow:end + 1] / (u @ u)) if np.all(u > 0) else math.nan
+        # a line through a concave growth (a damped load near its speed within a sample or
+        # two) reaches back too far: past a sample that still read rest (the line would have
+        # it moving by six rest deviations), or past what the angle turned allows.  Then the
+        # speed and angle of the first moving samples, with a lag of any time constant
+        at_last_rest = accel * max(float(t[last_rest]) - onset, 0.0) if math.isfinite(accel) else 0.0
+        past_rest = at_last_rest > 6.0 * noise + (dev[last_rest] if dev[last_rest] > 0 else 0.0)
+        if past_rest or not _angle_agrees(t, th, dev, direction, last_rest, onset):
+            lagged = _lag_onset(t, dev, th, direction, last_rest, end, noise)
+            if lagged is not None:
+                onset, accel = lagged, math.nan
+            elif past_rest:
+                onset, accel = None, math.nan
     elif grow < n:  # fewer than two growth samples: the angle turned by the first moving one
-        th = None if theta is None else np.asarray(theta, dtype=float)[ok]
         placed = _angle_onset(t, th, dev, direction, last_rest, limit)
         if placed is not None:
             onset, accel, on_limit = placed
+            if on_limit is None and onset <= t[last_rest]:
+                # a linear growth would need more time than the interval had: the speed rose
+                # faster (a damped load near its speed at once); the lag model over the moving
+                # samples that met no limit
+                free_end = grow + int(limited[0]) - 1 if limited.size else n - 1
+                lagged = _lag_onset(t, dev, th, direction, last_rest, free_end, noise)
+                if lagged is not None:
+                    onset, accel = lagged, math.nan
     if onset is None:  # the onset lies between the last sample at rest and the first moving one
         onset = 0.5 * float(t[last_rest] + t[min(grow, n - 1)])
     return Breakaway(onset, direction, int(ok[last_rest]), float(base(np.array([onset]))[0]), noise,
@@ -829,8 +947,13 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3, theta=None) -> Breakaw
 
 
 def value_at_onset(time, values, onset_time: float, count: int) -> float:
-    """A slowly ramped channel at the onset: robust line through its last ``count``
-    readings before the onset, evaluated there [unit of values]."""
+    """A slowly ramped channel at the onset: robust line through its last readings
+    before the onset, evaluated there [unit of values].
+
+    At most ``count`` readings; fewer where a quadratic through them bends
+    significantly (|curvature| beyond 3 standard errors: the hold before a ramp
+    began in the window, or a supply ripple is slow enough to follow), down to six:
+    a line across such a bend would miss the value at its end."""
     t = np.asarray(time, dtype=float)
     x = np.asarray(values, dtype=float)
     sel = np.flatnonzero((t < onset_time) & np.isfinite(x))[-count:]
@@ -838,6 +961,17 @@ def value_at_onset(time, values, onset_time: float, count: int) -> float:
         return math.nan
     if sel.size < 4:
         return float(x[sel[-1]])
+    while sel.size > 6:
+        u = t[sel] - onset_time
+        u = u / max(float(np.ptp(u)), 1e-300)
+        X = np.vander(u, 3)
+        coef, *_ = np.linalg.lstsq(X, x[sel], rcond=None)
+        r = x[sel] - X @ coef
+        s2 = float(r @ r) / (sel.size - 3)
+        cov = np.linalg.pinv(X.T @ X) * s2
+        if not abs(coef[0]) > 3.0 * math.sqrt(max(cov[0, 0], 0.0)):
+            break
+        sel = sel[-max(6, (2 * sel.size) // 3):]
     coef, _ = _robust_poly(t[sel] - onset_time, x[sel], 1)
     return float(np.polyval(coef, 0.0))
 
