@@ -171,3 +171,28 @@ def test_place_limited_onset_inverts_the_kinematics():
         b = ex.find_breakaway(t, w, theta=th)
         assert b.limited is not None
         assert ex.place_limited_onset(b.limited, alpha) == pytest.approx(t0, abs=1e-6)
+
+
+def test_damped_load_breakaway_at_a_low_rate_from_speed_and_angle():
+    """A load with damping reaches near its speed within a sample (first-order lag, τ = 40 ms,
+    plus a slow rise as the ramp goes on) at 10 Hz: a line through the growth samples reaches
+    back past samples still at rest; speed and angle of the first moving samples place it."""
+    rate, tau, V, rise = 10.0, 0.04, 1.5, 2.0
+    errs = []
+    for ph in np.linspace(0.05, 0.95, 10):
+        t0 = 3.0 + ph / rate
+        t = np.arange(0.0, 6.0, 1.0 / rate)
+        u = np.clip(t - t0, 0.0, None)
+        speed = V * -np.expm1(-u / tau) + rise * u
+        theta = 0.4 + V * (u + tau * np.expm1(-u / tau)) + 0.5 * rise * u * u
+        theta = np.round(theta / math.radians(0.01)) * math.radians(0.01)
+        noise = 3e-4 * np.random.default_rng(int(ph * 100)).standard_normal(t.size)
+        b = ex.find_breakaway(t, speed + noise, theta=theta)
+        errs.append(b.onset_time - t0)
+    errs = np.array(errs)
+    # where the first moving sample is still on the rise (u₁ < 2τ here), within a few ms (a line
+    # through the growth was up to 100 ms early); where it is already near the plateau the angle
+    # fixes t₀ + τ only, and the onset is known to within the part of the interval left
+    on_rise = (1.0 - np.linspace(0.05, 0.95, 10)) / rate < 2 * tau
+    assert np.max(np.abs(errs[on_rise])) < 2e-3, errs
+    assert np.max(np.abs(errs)) < 0.25 / rate, errs
