@@ -196,3 +196,28 @@ def test_damped_load_breakaway_at_a_low_rate_from_speed_and_angle():
     on_rise = (1.0 - np.linspace(0.05, 0.95, 10)) / rate < 2 * tau
     assert np.max(np.abs(errs[on_rise])) < 2e-3, errs
     assert np.max(np.abs(errs)) < 0.25 / rate, errs
+
+
+def test_pressure_at_the_onset_follows_a_supply_ripple_and_skips_the_hold():
+    """The shaft breaks away where the supply ripple lifts the pressure over the threshold;
+    a line through fifty readings would average the ripple out and read it low.  And a
+    hold before the ramp, within the window, must not bend the line."""
+    rng = np.random.default_rng(3)
+    rate, ramp = 100.0, 2e5
+    t = np.arange(0.0, 8.0, 1.0 / rate)
+    errs, long_errs = [], []
+    for k in range(20):
+        phase = rng.uniform(0, 2 * np.pi)
+        p = 40e5 + ramp * t + 0.1e5 * np.sin(2 * np.pi * 6.0 * t + phase)
+        onset = t[600 + int(np.argmax(p[600:700]))] + 0.004  # near a crest
+        read = p + 300.0 * rng.standard_normal(t.size)
+        truth = 40e5 + ramp * onset + 0.1e5 * np.sin(2 * np.pi * 6.0 * onset + phase)
+        errs.append(ex.value_at_onset(t, read, onset, 50) - truth)
+        sel = np.flatnonzero(t < onset)[-50:]
+        long_errs.append(np.polyval(np.polyfit(t[sel] - onset, read[sel], 1), 0.0) - truth)
+    assert np.sqrt(np.mean(np.square(errs))) < 0.25 * np.sqrt(np.mean(np.square(long_errs)))
+    assert abs(np.mean(errs)) < 0.02e5 < abs(np.mean(long_errs))
+    # a hold, then a ramp starting 0.3 s before the onset, 25 readings a second
+    t = np.arange(0.0, 4.0, 0.04)
+    p = 30e5 + 10e5 * np.clip(t - 2.7, 0.0, None) + 1e3 * rng.standard_normal(t.size)
+    assert abs(ex.value_at_onset(t, p, 3.0, 50) - (30e5 + 10e5 * 0.3)) < 0.05e5

@@ -946,14 +946,21 @@ def find_breakaway(time, speed, rest_speed: float = 2e-3, theta=None) -> Breakaw
                      accel, on_limit)
 
 
-def value_at_onset(time, values, onset_time: float, count: int) -> float:
-    """A slowly ramped channel at the onset: robust line through its last readings
-    before the onset, evaluated there [unit of values].
+ONSET_WINDOWS = (3, 4, 6, 8, 12, 16, 24, 32, 50)  # readings a line at the onset may go through
 
-    At most ``count`` readings; fewer where a quadratic through them bends
-    significantly (|curvature| beyond 3 standard errors: the hold before a ramp
-    began in the window, or a supply ripple is slow enough to follow), down to six:
-    a line across such a bend would miss the value at its end."""
+
+def value_at_onset(time, values, onset_time: float, count: int) -> float:
+    """A slowly ramped channel at the onset: a line through its last readings before
+    the onset, evaluated there [unit of values].
+
+    How many readings (3 … ``count``): those whose line best predicts the reading
+    that follows, over the last ten readings before the onset (one step ahead, as
+    the onset is at most a step beyond the last reading).  A long line averages the
+    sensor's noise; a short one follows a supply ripple that a long one would
+    average out (the shaft breaks away where the ripple pushes the pressure up, so
+    that averaging reads it low) and stays clear of the hold before the ramp.  The
+    line of the chosen length is fitted robustly (readings beyond 3.5 deviations
+    left out)."""
     t = np.asarray(time, dtype=float)
     x = np.asarray(values, dtype=float)
     sel = np.flatnonzero((t < onset_time) & np.isfinite(x))[-count:]
@@ -961,17 +968,28 @@ def value_at_onset(time, values, onset_time: float, count: int) -> float:
         return math.nan
     if sel.size < 4:
         return float(x[sel[-1]])
-    while sel.size > 6:
-        u = t[sel] - onset_time
-        u = u / max(float(np.ptp(u)), 1e-300)
-        X = np.vander(u, 3)
-        coef, *_ = np.linalg.lstsq(X, x[sel], rcond=None)
-        r = x[sel] - X @ coef
-        s2 = float(r @ r) / (sel.size - 3)
-        cov = np.linalg.pinv(X.T @ X) * s2
-        if not abs(coef[0]) > 3.0 * math.sqrt(max(cov[0, 0], 0.0)):
+    before = np.flatnonzero((t < onset_time) & np.isfinite(x))
+    tt, xx = t[before], x[before]
+    best, best_err = min(count, sel.size), math.inf
+    tests = 40
+    for m in [k for k in ONSET_WINDOWS if k < count] + [count]:
+        if before.size < m + 3:
             break
-        sel = sel[-max(6, (2 * sel.size) // 3):]
+        err, used = 0.0, 0
+        for j in range(max(m, before.size - tests), before.size):
+            u = tt[j - m:j] - tt[j]
+            if m >= 2 and np.ptp(u) > 0:
+                slope, icpt = np.polyfit(u, xx[j - m:j], 1)
+            else:
+                icpt = float(xx[j - 1])
+            err += (xx[j] - icpt) ** 2
+            used += 1
+        if used and err / used < best_err:
+            best, best_err = m, err / used
+    sel = sel[-best:]
+    if sel.size < 4:
+        u = t[sel] - onset_time
+        return float(np.polyval(np.polyfit(u, x[sel], 1), 0.0)) if sel.size >= 2 and np.ptp(u) > 0 else float(x[sel[-1]])
     coef, _ = _robust_poly(t[sel] - onset_time, x[sel], 1)
     return float(np.polyval(coef, 0.0))
 
