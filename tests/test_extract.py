@@ -332,3 +332,22 @@ def test_input_spikes_leave_ripple_quantization_and_noise_alone():
     x = rng.standard_normal(500)
     x[[0, 10, 11, 200, 499]] += 30.0
     assert list(np.flatnonzero(ex.input_spikes(x))) == [0, 10, 11, 200, 499]
+
+
+def test_shaft_order_sampled_in_step_is_left_to_the_trend():
+    """1500 rpm at 50 Hz: the shaft turns half a revolution a sample, so order 2 reads as a
+    constant (and order 1 sits on the Nyquist frequency).  Neither may be fitted: a
+    'ripple' at order 2 fitted to the trend's leftovers came back as a constant false
+    acceleration, 2ω times its size."""
+    from motorid.identify.extract import aliased_cycles, running_acceleration, smoothed_acceleration
+
+    rng = np.random.default_rng(6)
+    w0, rate = 1500 * 2 * np.pi / 60, 50.0
+    t = np.arange(400) / rate
+    wander = 0.3 * np.sin(2 * np.pi * 0.37 * t) + 0.2 * np.sin(2 * np.pi * 1.3 * t + 1.0)
+    speed = w0 + wander + 0.02 * rng.standard_normal(t.size)
+    theta = w0 * t + 0.2 + np.cumsum(wander) / rate
+    cycles = aliased_cycles(t, speed, (1, 2))
+    assert cycles[2] < 1.0 and abs(cycles[1] - 200.0) < 1.0
+    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
+    np.testing.assert_array_equal(got, smoothed_acceleration(t, speed))

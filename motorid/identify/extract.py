@@ -346,6 +346,22 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
 RIPPLE_F = 2.0
 
 
+def aliased_cycles(time, speed, orders) -> dict:
+    """Cycles that each shaft order of a steady run goes through as the samples see it
+    (aliased) → {order: cycles over the run} [-].  Order k turns k·ω̄·Δt/2π cycles a
+    sample; sampling folds that to its distance from the nearest whole number, 0 … ½.
+    Near 0 the order is in step with the sampling: a speed ripple at it reads as a
+    constant, and its acceleration, k·ω times its size, is invisible in the samples."""
+    t = np.asarray(time, dtype=float)
+    w = np.asarray(speed, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(w)
+    if ok.sum() < 3:
+        return {int(k): 0.0 for k in orders}
+    dt = float(np.median(np.diff(np.sort(t[ok]))))
+    turn = abs(float(np.mean(w[ok]))) * dt / (2 * np.pi)
+    return {int(k): abs(k * turn - round(k * turn)) * int(ok.sum()) for k in orders}
+
+
 def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1, 2)) -> np.ndarray:
     """dω/dt of a steady run with any speed ripple locked to the shaft angle resolved [rad/s²].
 
@@ -372,10 +388,10 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
     orders = tuple(int(k) for k in orders)
     if not orders or sel.size < 50:
         return plain
-    revolutions = abs(np.ptp(np.unwrap(th[sel]))) / (2 * np.pi)
-    if revolutions < 2.0:
-        return plain
     span = np.ptp(t[sel])
+    if abs(float(np.mean(w[sel]))) * span / (2 * np.pi) < 2.0:
+        return plain
+    revolutions = abs(np.ptp(np.unwrap(th[sel]))) / (2 * np.pi)  # as sampled: order 1's aliased cycles
     u = 2.0 * (t[sel] - t[sel].min()) / max(span, 1e-300) - 1.0
     trend = np.polynomial.chebyshev.chebvander(u, int(np.clip(revolutions / 2, 2, 10)))
     m = trend.shape[1]
@@ -401,7 +417,12 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
     # left out puts all of itself, k·ω times, into the acceleration)
     coef, rss_kept, _, _ = fit([])
     kept = []
+    cycles = aliased_cycles(t[sel], w[sel], orders)
     for k in sorted(orders):
+        # an order the sampling folds near 0 Hz is the trend's; near the Nyquist frequency its
+        # cosine and sine read alike
+        if not (cycles[k] >= m / 2 + 1 and 0.5 * sel.size - cycles[k] >= 1.0):
+            continue
         c, rss, dof, cond = fit(kept + [k])
         if c is None or dof < 20 or cond > 1e6 or not rss > 0:
             continue
@@ -1240,6 +1261,13 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
                 steady[chosen] = True
                 acc = running_acceleration(cols["time_s"], cols["speed_rad_s"], cols["theta_rad"], steady,
                                            settings.accel_window, settings.shaft_orders)
+                cycles = aliased_cycles(cols["time_s"][chosen], cols["speed_rad_s"][chosen], settings.shaft_orders)
+                in_step = [k for k, c in cycles.items() if c < 1.0]
+                if in_step and np.ptp(cols["time_s"][chosen]) * abs(_median(cols["speed_rad_s"][chosen])) > 4 * np.pi:
+                    notes.append(f"run {key}: sampled in step with shaft order {', '.join(map(str, in_step))} "
+                                 f"(it folds to under one cycle over the run): a speed ripple locked to the "
+                                 f"shaft at that order would read as a constant, and its acceleration would "
+                                 f"bias this run's torque; a sample rate not in step with the speed avoids it")
                 picks.append(pos[chosen])
                 accel.append(acc[chosen])
                 mu = cols["viscosity_Pa_s"][chosen]
