@@ -38,6 +38,7 @@ FORMAT_COLUMNS = {
     "viscosity_Pa_s": ("viscosity_mPas", 1e-3),
 }
 SI_COLUMNS = ["run_id", "protocol", *FORMAT_COLUMNS]
+VISCOSITY_FROM_OIL = "viscosity_from_oil_model"  # frame column: True where μ came from oil_temp_C and the spec
 PROTOCOLS = ("constant_speed", "constant_pressure", "startability", "constant_flow", "constant_torque")
 
 # printf formats that keep more digits than any bench sensor resolves
@@ -449,6 +450,7 @@ def read_log(path, spec=None) -> pd.DataFrame:
         else:
             mu = np.where(gaps, _oil_viscosity(spec, np.where(gaps, temp, 40.0)), mu)
     out["viscosity_Pa_s"] = mu
+    out[VISCOSITY_FROM_OIL] = gaps  # rows whose viscosity the oil model gave, not a viscometer
 
     out["file"] = _constant_categorical(str(path), len(out))
     out["run"] = out["run_id"]

@@ -148,3 +148,17 @@ def test_startability_runs_alone_give_reasons_not_a_crash(tmp_path, capsys):
     params = doc["parameters"]
     assert not any(p["identifiable"] for p in params.values())
     assert "running" in params["KF"]["reason"] and "K_F" in params["KFS"]["reason"]
+
+
+def test_viscosity_from_the_oil_model_is_said_in_the_warnings(tmp_path, small_log, capsys):
+    df = pd.read_csv(small_log)
+    without = tmp_path / "no_viscometer.csv"
+    df.drop(columns=["viscosity_mPas"]).to_csv(without, index=False)
+    for log, out, expect in ((small_log, "with", False), (without, "without", True)):
+        rc, text, err = _fit([log, "--motor", MOTOR, "--out", tmp_path / out], capsys)
+        assert rc == 0, err
+        warnings = json.loads((tmp_path / out / "result.json").read_text())["fit"]["warnings"]
+        said = [w for w in warnings if "oil_temp_C" in w and "viscometer" in w]
+        assert bool(said) == expect, warnings
+        assert ("viscometer" in text) == expect
+    assert "100 %" in said[0] and "KL0" in said[0]

@@ -28,6 +28,24 @@ def load_campaign(paths: Sequence, spec):
     return frame, extract(frame, spec)
 
 
+def viscosity_model_warning(frame, dataset, ls) -> str:
+    """A warning where the viscosity of running samples came from the oil model, not a
+    viscometer: K_v scales with μ and K_L0, K_AB with 1/μ, one for one, and the
+    standard errors do not hold the oil model's own error ("" where it did not)."""
+    from motorid.logs import VISCOSITY_FROM_OIL
+
+    if frame is None or VISCOSITY_FROM_OIL not in frame.columns or not dataset.n_running:
+        return ""
+    share = float(frame[VISCOSITY_FROM_OIL].to_numpy()[dataset.frame_index].mean())
+    affected = [k for k in ("Kv", "KL0", "KAB") if ls.identifiable.get(k)]
+    if share <= 0 or not affected:
+        return ""
+    return (f"the viscosity of {100 * share:.0f} % of the running samples comes from oil_temp_C and the spec's "
+            f"[oil] (Walther, ASTM D341; density ρ15/(1 + β(T − 15 °C))), not a viscometer: "
+            f"{', '.join(affected)} carry that model's error one for one (K_v ∝ μ, K_L0 and K_AB ∝ 1/μ), "
+            f"and their std does not include it")
+
+
 def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | None = None,
              mechanisms: Sequence = (), seed: int = 0, progress: bool | None = None,
              dataset=None, frame=None) -> Identification:
@@ -37,6 +55,9 @@ def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | N
     if dataset is None:
         frame, dataset = load_campaign(paths, spec)
     ls = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=options)
+    note = viscosity_model_warning(frame, dataset, ls)
+    if note:
+        ls.warnings.append(note)
     post, priors = None, {}
     if bayes and ls.free:
         from motorid.identify.bayes import prior_scale, sample_posterior
