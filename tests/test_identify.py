@@ -126,3 +126,16 @@ def test_isolated_spikes_do_not_wreck_the_fit():
     assert in_fit[1] <= ls.outliers["q_case"] <= in_fit[1] + 10
     for k in ("Kv", "KF", "TFc", "KL0", "KAB"):
         assert abs(ls.values[k] - truth[k]) < 0.02 * truth[k], k
+
+
+def test_breakaways_without_a_held_torque_say_so():
+    frame, spec, truth = simulated()
+    out = frame.copy()
+    out.loc[out["protocol"] == "startability", "torque_Nm"] = np.nan
+    ds = extract(out, spec)
+    assert ds.n_events > 0
+    ls = fit_least_squares(ds, spec)
+    for k in ("KFS", "Ks"):
+        assert not ls.identifiable[k]
+        assert f"{ds.n_events} breakaway(s) found" in ls.reasons[k] and "torque" in ls.reasons[k]
+    assert ls.identifiable["KF"] and ls.identifiable["Kv"]

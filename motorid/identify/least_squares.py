@@ -137,8 +137,10 @@ def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
     n_ev = 0 if data.events is None else int(np.asarray(data.held_torque).size)
     good_ev = _has(data.held_torque) if n_ev else np.zeros(0, bool)
     if good_ev.sum() == 0:
+        why = ("no startability breakaway found in these logs (ISO 4392-2 runs needed)" if n_ev == 0 else
+               f"{n_ev} breakaway(s) found, but no torque reading while the shaft was held")
         for k in ("KFS", "Ks"):
-            reasons[k] = "no startability breakaway found in these logs (ISO 4392-2 runs needed)"
+            reasons[k] = why
     elif good_ev.sum() < 3 or _spread(np.asarray(data.events.p_a + data.events.p_b)[good_ev]) < 0.05:
         msg = "breakaway at a single port-pressure level: K_FS and K_s cannot be told apart"
         reasons["KFS"] = msg
