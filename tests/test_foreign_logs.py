@@ -1,0 +1,67 @@
+"""`motorid fit` on logs from an independent bench generator (benchmarks/foreign_bench.py).
+
+The generator re-derives MODEL.md's physics without importing motorid and writes
+the logs the way another lab's bench would (other motors, dynamics, sensors and
+CSV flavours).  Two small campaigns, each fitted by the command line in a
+subprocess: every parameter must be identifiable and within 4 standard errors
+of the generator's truth.  (benchmarks/bench_foreign.py runs the full study,
+including the scenarios where motorid does not pass.)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+import foreign_bench as fb  # noqa: E402
+
+PARAMS = ["Kv", "KF", "KFS", "TFc", "Ks", "KL0", "KL_a1", "KL_b1", "KAB"]
+
+
+def _fit_and_compare(sc, tmp_path: Path, quick: bool):
+    info = fb.generate(sc, tmp_path / "campaign", quick=quick)
+    out = tmp_path / "fit"
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    p = subprocess.run([sys.executable, "-m", "motorid", "fit", *info["logs"], "--motor", info["motor"],
+                        "--out", str(out)], capture_output=True, text=True, env=env, cwd=REPO, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    result = json.loads((out / "result.json").read_text())
+    truth = tomllib.loads(Path(info["truth"]).read_text())["parameters"]
+    z = {}
+    for k in PARAMS:
+        e = result["parameters"][k]
+        assert e["identifiable"], f"{k}: {e.get('reason')}"
+        z[k] = (e["value"] - truth[k]) / e["std"]
+    bad = {k: round(v, 2) for k, v in z.items() if abs(v) > 4.0}
+    assert not bad, f"estimates beyond 4 σ of the truth: {bad} (all z: { {k: round(v, 2) for k, v in z.items()} })"
+
+
+def test_foreign_si_lowrate_deadweight(tmp_path):
+    """11 pistons, 180 cm³; SI headers (Pa, rad/s, m³/s, rad, K); 10-100 Hz; runs of several protocols per
+    file with run ids restarting in each file; startability against a dead weight on a drum; constant-pressure
+    runs against a fan-law brake that spins up and settles."""
+    _fit_and_compare(fb.scenario("n11_large_SI_lowrate"), tmp_path, quick=True)
+
+
+def test_foreign_us_units_stickslip(tmp_path):
+    """12 pistons, 40 cm³; psi/gpm/°F/lbf·ft headers, gzip, one file per protocol, shuffled and extra columns;
+    startability fed by a constant flow into a compressible line (stick-slip after breakaway)."""
+    sc = fb.Scenario(
+        "test_us_stickslip", 7, 12, 40.0, bench=fb.Bench(startability="flowfed"),
+        plan=fb.Plan(cs_speeds_rpm=(0.5, 20.0, 400.0), cs_rate=(10.0, 50.0, 200.0), cp_speeds_rpm=(300.0,),
+                     cp_temps_C=(40.0, 60.0), cp_rate=100.0, st_angles=5, st_loads=(0.15, 0.6), st_rate=100.0),
+        flavour=fb.Flavour(units="us", layout="per_protocol", gzip=True, shuffle_columns=True, extras=True))
+    _fit_and_compare(sc, tmp_path, quick=True)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(pytest.main([__file__, "-q"]))
