@@ -1046,7 +1046,7 @@ def scenarios() -> list:
                            cp_s=1.2)),
         Scenario("n8_50Hz_synchronous", 22, 8, 45.0, "8 pistons, 45 cm³; constant-speed runs logged at 50 Hz with "
                  "set points 750/1500/3000 rpm (shaft orders alias to 0 Hz); dyno ripple not shaft-locked "
-                 "(seed 22: Kv fails here and in 1 of seeds 21-26)",
+                 "(a shaft order in step with the sampling is left to the trend)",
                  bench=Bench(dyno_locked=(0.0, 0.0, 0.0)),
                  plan=Plan(cs_speeds_rpm=(0.3, 30.0, 750.0, 1500.0, 3000.0), cs_rate=50.0, cp_rate=50.0, st_rate=25.0),
                  flavour=Flavour(layout="per_protocol", gzip=True)),

@@ -88,6 +88,9 @@ class FitResult:
     viscosity_run_variance: dict = field(default_factory=dict)
     # γ of the breakaway events' variance model σ_i² = σ₀²(1 + γ x_i²/median x²) (0: one level)
     breakaway_noise_shape: float = 0.0
+    # the share of `covariance` added where the breakaway events scatter more than their
+    # variance model says (:func:`breakaway_sandwich`; over `free`, None where nothing was added)
+    covariance_breakaway: np.ndarray | None = None
 
     @property
     def reduced_chi2(self) -> float:
@@ -730,8 +733,13 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     cov = _covariance(JtJ) if free else np.zeros((0, 0))
     cov_visc, visc_run_var = (viscosity_covariance(problem, values, cov) if (free and opt.viscosity_error)
                               else (None, {}))
+    cov_brk = breakaway_sandwich(problem, values, cov, residuals.get("breakaway"), sig.get("breakaway"),
+                                 inliers.get("breakaway")) if free and "breakaway" in obs else None
+    if cov_brk is not None:
+        cov = cov + cov_brk
     if chi2 / dof > 1.0:
         cov = cov * (chi2 / dof)  # noise underestimated: widen, never narrow
+        cov_brk = None if cov_brk is None else cov_brk * (chi2 / dof)
     if cov_visc is not None:
         cov = cov + cov_visc
     std = np.sqrt(np.clip(np.diag(cov), 0, None)) if free else np.zeros(0)
@@ -772,7 +780,62 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         used=used, chi2=chi2, dof=dof, steps=steps_total, converged=bool(converged), warnings=warnings,
         residuals=residuals, sigma=sig, inliers=inliers, params_all=all_params, mechanisms=tuple(mechanisms), problem=problem,
         covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var, breakaway_noise_shape=brk_gamma,
+        covariance_breakaway=cov_brk,
     )
+
+
+BREAKAWAY_ONLY = ("KFS", "Ks")  # parameters only the breakaway events determine
+
+
+def breakaway_sandwich(problem: _Problem, values: dict, cov: np.ndarray, residual, sigma, inliers):
+    """What to add to the covariance where the breakaway events scatter more than
+    their variance model says → (p, p) array [SI²], or None where nothing is added.
+
+    The events' σ come from a variance model (:func:`breakaway_noise`) fitted to a
+    few dozen residuals; another bench's events may scatter in another way (a
+    supply ripple the samples do not resolve, onsets that are harder to place at
+    some loads), and then the model-based (JᵀWJ)⁻¹ understates K_FS and K_s.  With
+    A_b = Σ_events J Jᵀ/σ² (their share of JᵀWJ) and its robust counterpart
+    M_b = Σ J Jᵀ z²/σ² · n/(n − k) (z the standardized residuals; k the
+    breakaway-only parameters; White's HC1), each breakaway-only parameter's
+    variance by the sandwich, (V M_b V)_jj, against the model's, (V A_b V)_jj: where
+    the sandwich's is larger, the difference is added to that parameter's variance
+    (its row and column scaled, the correlations kept): widened, never narrowed, as
+    the fit's χ²/dof scaling."""
+    free = list(problem.free)
+    brk_only = [free.index(k) for k in BREAKAWAY_ONLY if k in free]
+    if not brk_only or residual is None or not problem.has_events or problem.cells is None:
+        return None
+    r = np.asarray(residual, dtype=float)
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), r.shape)
+    use = np.asarray(inliers, dtype=bool) & np.isfinite(r) & np.isfinite(s) & (s > 0)
+    n, k = int(use.sum()), len(brk_only)
+    if n <= k + 2:
+        return None
+    w = np.where(use, 1.0 / np.where(use, s, 1.0), 0.0)
+    z = np.where(use, r * w, 0.0)
+    ctx = problem.ctx()
+    size = int(np.asarray(ctx.observed["breakaway"]).size)
+
+    def block(weights):
+        brk = ctx._replace(running=None, observed={"breakaway": ctx.observed["breakaway"]},
+                           weights={"breakaway": jnp.asarray(pad(weights, size))})
+        return np.asarray(_normal_equations(_as_jnp(values), brk)[0])
+
+    A_b = block(w)
+    M_b = block(w * np.abs(z)) * n / (n - k)
+    model_part = np.diag(cov @ A_b @ cov)[brk_only]
+    robust_part = np.diag(cov @ M_b @ cov)[brk_only]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        extra = np.where(np.isfinite(robust_part), np.maximum(robust_part - model_part, 0.0), 0.0)
+    if not np.any(extra > 0):
+        return None
+    # each breakaway-only parameter's variance raised by its own excess: cov → D cov D, D
+    # diagonal (1 elsewhere), which keeps the correlations and the matrix positive
+    d = np.ones(len(free))
+    d[brk_only] = np.sqrt(1.0 + extra / np.diag(cov)[brk_only])
+    out = d[:, None] * cov * d[None, :] - cov
+    return 0.5 * (out + out.T)
 
 
 @cached_jit

@@ -11,11 +11,10 @@ import numpy as np
 
 from motorid import model
 from motorid._atomic import write_bytes_atomic
-from motorid.identify.least_squares import CHANNEL_UNITS, FitResult
+from motorid.identify.least_squares import BREAKAWAY_ONLY, CHANNEL_UNITS, FitResult
 
 RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
-BREAKAWAY_ONLY = ("KFS", "Ks")  # parameters only the breakaway events determine
 
 
 def interval_dof(ls: FitResult) -> dict:
@@ -51,10 +50,13 @@ def interval_dof(ls: FitResult) -> dict:
     A_brk = np.asarray(_normal_equations(values, brk)[0])
     total = np.asarray(ls.covariance)
     visc = getattr(ls, "covariance_viscosity", None)
-    V = (total - (0.0 if visc is None else visc)) / max(ls.reduced_chi2, 1.0)  # the fit widens V by χ²/dof > 1
+    brk = getattr(ls, "covariance_breakaway", None)  # the sandwich's widening, also σ_brk's
+    scale = max(ls.reduced_chi2, 1.0)
+    V = (total - (0.0 if visc is None else visc) - (0.0 if brk is None else brk)) / scale
     d = np.diag(total)  # the viscosity's share rests on hundreds of readings per run: ν = ∞
     with np.errstate(invalid="ignore", divide="ignore"):
-        f = np.clip(np.diag(V @ A_brk @ V) / d, 0.0, 1.0)
+        # (the sandwich's widening scales with the events' scatter as the rest of their share)
+        f = np.clip((np.diag(V @ A_brk @ V) + (0.0 if brk is None else np.diag(brk) / scale)) / d, 0.0, 1.0)
     for i, k in enumerate(free):
         if np.isfinite(f[i]) and f[i] > 1e-6:
             out[k] = float(nu_brk / f[i] ** 2)
@@ -139,6 +141,12 @@ def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict 
                 if visc[i, i] > 1e-4 * ls.std[k] ** 2:
                     # the part of std that the smoothed viscosity's run-level error carries
                     entry["std_viscosity"] = float(np.sqrt(visc[i, i]))
+            brk = getattr(ls, "covariance_breakaway", None)
+            if brk is not None and k in ls.free and brk[ls.free.index(k), ls.free.index(k)] > 0:
+                # the breakaway events scattered more than their variance model says: the
+                # sandwich's widening, as a share of the variance
+                i = ls.free.index(k)
+                entry["widened_by_scatter"] = float(brk[i, i] / ls.std[k] ** 2)
         else:
             entry["reason"] = ls.reasons.get(k, "not determined by these logs")
         if bayes is not None and k in bayes.median:
