@@ -191,11 +191,19 @@ def moving_median(x, window: int) -> np.ndarray:
 
 def _window_median(windows: np.ndarray) -> np.ndarray:
     """Median of the finite values of each row (NaN where a row has none)."""
-    w = np.sort(windows, axis=1)  # NaN last
-    count = w.shape[1] - np.isnan(w).sum(axis=1)
-    rows = np.arange(w.shape[0])
-    lo, hi = w[rows, np.maximum(count - 1, 0) // 2], w[rows, np.maximum(count, 1) // 2]
-    return np.where(count > 0, 0.5 * (lo + hi), np.nan)
+    out = np.full(windows.shape[0], np.nan)
+    full = ~np.isnan(windows).any(axis=1)
+    w = windows.shape[1]
+    if full.any():  # rows without a gap: a partial sort is enough
+        part = np.partition(windows[full], [(w - 1) // 2, w // 2], axis=1)
+        out[full] = 0.5 * (part[:, (w - 1) // 2] + part[:, w // 2])
+    if not full.all():
+        ws = np.sort(windows[~full], axis=1)  # NaN last
+        count = w - np.isnan(ws).sum(axis=1)
+        rows = np.arange(ws.shape[0])
+        lo, hi = ws[rows, np.maximum(count - 1, 0) // 2], ws[rows, np.maximum(count, 1) // 2]
+        out[~full] = np.where(count > 0, 0.5 * (lo + hi), np.nan)
+    return out
 
 
 def input_spikes(x, k: float = 6.0, half: int = 3) -> np.ndarray:
@@ -209,10 +217,9 @@ def input_spikes(x, k: float = 6.0, half: int = 3) -> np.ndarray:
     around it; the deviation is the larger of the window's own MAD (ripple, steps
     and transients widen it) and the run's: the MAD of each reading against the
     median of its four neighbours (itself left out: against a median that holds it,
-    a reading is so often the median itself that the MAD collapses to zero), the
-    scaled spread of their central 80 % (readings on one quantization level) and
-    the quantization step.  Two spikes in a row are still found.  NaN readings are
-    never spikes.
+    a reading is so often the median itself that the MAD collapses to zero), or
+    where that is zero (quantized readings on their neighbours' level) the smallest
+    step.  Two spikes in a row are still found.  NaN readings are never spikes.
     """
     x = np.asarray(x, dtype=float)
     out = np.zeros(x.size, bool)
@@ -221,21 +228,29 @@ def input_spikes(x, k: float = 6.0, half: int = 3) -> np.ndarray:
         return out
     v = x[ok]
     view = np.lib.stride_tricks.sliding_window_view
-    pad2 = np.concatenate([[np.nan] * 2, v, [np.nan] * 2])
-    r = v - _window_median(view(pad2, 5)[:, [0, 1, 3, 4]])
-    centre = float(np.median(r))
-    mad = _MAD * float(np.median(np.abs(r - centre)))
-    lo, hi = np.percentile(r, [10.0, 90.0])
-    central = r[(r >= lo) & (r <= hi)]
-    trimmed = 1.51 * float(central.std()) if central.size >= 5 else 0.0
-    levels, counts = np.unique(v, return_counts=True)
-    frequent = levels[counts >= max(3, 0.02 * v.size)]  # the levels readings keep returning to
-    quantum = float(np.diff(frequent).min()) if frequent.size >= 2 else 0.0
-    floor = max(mad, trimmed, quantum, 1e-9 * float(np.max(np.abs(v))), 1e-300)
-    windows = view(np.concatenate([[np.nan] * half, v, [np.nan] * half]), 2 * half + 1)
-    med = _window_median(windows)
-    local = _MAD * _window_median(np.abs(windows - med[:, None]))
-    out[ok] = np.abs(v - med) > k * np.maximum(local, floor)
+    # the median of the four neighbours: (sum − largest − smallest)/2 inside, sorted at the ends
+    a, b, c, d = v[:-4], v[1:-3], v[3:-1], v[4:]
+    near = np.empty(v.size)
+    near[2:-2] = 0.5 * (a + b + c + d - np.maximum(np.maximum(a, b), np.maximum(c, d))
+                        - np.minimum(np.minimum(a, b), np.minimum(c, d)))
+    pad2 = np.concatenate([[np.nan] * 2, v[:4], [np.nan] * 2])
+    near[:2] = _window_median(view(pad2, 5)[:2, [0, 1, 3, 4]])
+    pad2 = np.concatenate([[np.nan] * 2, v[-4:], [np.nan] * 2])
+    near[-2:] = _window_median(view(pad2, 5)[-2:, [0, 1, 3, 4]])
+    r = np.abs(v - near)
+    mad = _MAD * float(np.partition(r, r.size // 2)[r.size // 2])
+    if not mad > 0:  # quantized readings that mostly sit on their neighbours' level: one step
+        steps = r[r > 0]  # (unless only a few readings stand off a flat signal: those are spikes)
+        mad = float(steps.min()) if steps.size >= max(3, 0.05 * r.size) else 0.0
+    floor = max(mad, 1e-9 * float(np.max(np.abs(v))), 1e-300)
+    # candidates: far from their neighbours' median (the window's median is within the
+    # window's spread of it); for them the window's median and deviation
+    i = np.flatnonzero(r > 0.5 * k * floor)
+    if i.size:
+        windows = view(np.concatenate([[np.nan] * half, v, [np.nan] * half]), 2 * half + 1)[i]
+        med = _window_median(windows)
+        local = _MAD * _window_median(np.abs(windows - med[:, None]))
+        out[ok[i]] = np.abs(v[i] - med) > k * np.maximum(local, floor)
     return out
 
 
@@ -990,23 +1005,24 @@ def value_at_onset(time, values, onset_time: float, count: int) -> float:
     if sel.size < 4:
         return float(x[sel[-1]])
     before = np.flatnonzero((t < onset_time) & np.isfinite(x))
-    tt, xx = t[before], x[before]
-    best, best_err = min(count, sel.size), math.inf
     tests = 40
+    keep = before[-(count + tests):]
+    c, xx = t[keep] - t[keep[-1]], x[keep]
+    # sliding sums for every window at once: a line through readings j−m … j−1, at reading j
+    cum = [np.r_[0.0, np.cumsum(v)] for v in (np.ones_like(c), c, c * c, xx, c * xx)]
+    best, best_err = min(count, sel.size), math.inf
     for m in [k for k in ONSET_WINDOWS if k < count] + [count]:
-        if before.size < m + 3:
+        j = np.arange(max(m, keep.size - tests), keep.size)
+        if keep.size < m + 3 or j.size == 0:
             break
-        err, used = 0.0, 0
-        for j in range(max(m, before.size - tests), before.size):
-            u = tt[j - m:j] - tt[j]
-            if m >= 2 and np.ptp(u) > 0:
-                slope, icpt = np.polyfit(u, xx[j - m:j], 1)
-            else:
-                icpt = float(xx[j - 1])
-            err += (xx[j] - icpt) ** 2
-            used += 1
-        if used and err / used < best_err:
-            best, best_err = m, err / used
+        n0, s1, s2, sx, scx = (v[j] - v[j - m] for v in cum)
+        det = n0 * s2 - s1 * s1
+        with np.errstate(invalid="ignore", divide="ignore"):
+            slope = np.where(det > 0, (n0 * scx - s1 * sx) / det, 0.0)
+        pred = (sx - slope * s1) / n0 + slope * c[j]
+        err = float(np.mean((xx[j] - pred) ** 2))
+        if err < best_err:
+            best, best_err = m, err
     sel = sel[-best:]
     if sel.size < 4:
         u = t[sel] - onset_time
