@@ -22,6 +22,7 @@ demo: $(STAMP)
 	$(PY) -m motorid.demo
 
 bench: $(STAMP)
+	$(PY) -m compileall -q motorid  # byte-code on disk, as a normal install has it, even under PYTHONDONTWRITEBYTECODE
 	$(PY) benchmarks/run.py
 
 clean:

@@ -237,7 +237,9 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
         f"The end-to-end goal needs ≤ {base_e2e[1] / 2:.2f} s. A later run neither traces nor compiles: "
         "the fit's compiled programs are kept on disk (`motorid._aot`, serialized XLA executables keyed by "
         "the motorid sources, the JAX version, the machine and the argument shapes), so it pays start-up "
-        "and imports, reading, extraction and the fit itself.",
+        "and imports, reading, extraction and the fit itself.  `make bench` byte-compiles motorid first "
+        "(`compileall`, as pip does for a regular install; this machine sets PYTHONDONTWRITEBYTECODE, "
+        "under which an editable install would recompile its 0.1 s of sources on every run).",
         "",
         "### Seconds",
         "",
