@@ -43,7 +43,7 @@ def _extra_protocol(cand, prots):
     else:
         base = next(p for p in prots if p.procedure == "constant_speed")
         rpm = float(s["speed_rpm"])
-        rate = 10.0 if rpm <= 0.5 else 20.0 if rpm <= 2 else 50.0 if rpm <= 20 else 100.0  # as the candidate
+        rate = round(1.0 / float(np.median(np.diff(np.asarray(cand.running.time)))), 6)  # sampled as the candidate
         runs = (RunPlan(index=0, direction=int(s["direction"]), oil_temp=40.0, sample_rate=rate,
                         speed=rpm * 2 * math.pi / 60.0, pressure_difference=float(s["pressure_difference_bar"]) * 1e5),)
     return replace(base, name=f"extra_{base.procedure}", runs=runs)
