@@ -182,11 +182,7 @@ def moving_median(x, window: int) -> np.ndarray:
     if n == 0 or window <= 1:
         return x.copy()
     padded = np.concatenate([np.full(h, np.nan), x, np.full(h, np.nan)])
-    win = np.sort(np.lib.stride_tricks.sliding_window_view(padded, window), axis=1)  # NaN sorts last
-    count = window - np.isnan(win).sum(axis=1)
-    rows = np.arange(n)
-    lo, hi = win[rows, np.maximum(count - 1, 0) // 2], win[rows, np.maximum(count, 1) // 2]
-    return np.where(count > 0, 0.5 * (lo + hi), np.nan)
+    return _window_median(np.lib.stride_tricks.sliding_window_view(padded, window))
 
 
 def _window_median(windows: np.ndarray) -> np.ndarray:
@@ -726,12 +722,9 @@ def _angle_onset(t, theta, dev, direction: float, last_rest: int, limit) -> tupl
     grow = last_rest + 1
     t_lr, t1 = float(t[last_rest]), float(t[grow])
     span = t1 - t_lr
-    rest = np.arange(max(0, last_rest - 9), last_rest + 1)
-    rest = rest[np.isfinite(theta[rest])]
-    if rest.size == 0 or not math.isfinite(theta[grow]) or not span > 0.0:
+    level = _rest_angle(theta, last_rest)
+    if level is None or not math.isfinite(theta[grow]) or not span > 0.0:
         return None
-    ref = float(theta[rest[-1]])
-    level = ref + float(np.median(np.remainder(theta[rest] - ref + np.pi, 2 * np.pi) - np.pi))
     turned = lambda k: direction * math.remainder(float(theta[k]) - level, 2 * math.pi)  # noqa: E731
     w1 = float(dev[grow])
     if not w1 > 0.0:
@@ -780,19 +773,27 @@ def place_limited_onset(limited: tuple, acceleration: float) -> float:
 ANGLE_STEP = math.radians(0.01)  # shaft-angle reading step assumed where the readings do not show one [rad]
 
 
-def _turned_since_rest(theta, direction: float, last_rest: int, idx) -> np.ndarray | None:
+def _rest_angle(theta, last_rest: int) -> float | None:
+    """Shaft angle at rest [rad]: the circular median of the last ten readings up to
+    ``last_rest`` about the last of them; None where none was read."""
+    rest = np.arange(max(0, last_rest - 9), last_rest + 1)
+    rest = rest[np.isfinite(theta[rest])]
+    if rest.size == 0:
+        return None
+    ref = float(theta[rest[-1]])
+    return ref + float(np.median(np.remainder(theta[rest] - ref + np.pi, 2 * np.pi) - np.pi))
+
+
+def _turned_since_rest(theta, direction: float, last_rest: int, idx) -> tuple | None:
     """Angle the shaft turned in the direction of motion since rest, at samples ``idx``
     after ``last_rest`` [rad] (rest: the median of the last ten readings at rest), and the
     angle's reading step [rad] → (turned, step); None where the readings give nothing."""
     if theta is None:
         return None
     idx = np.atleast_1d(np.asarray(idx, dtype=int))
-    rest = np.arange(max(0, last_rest - 9), last_rest + 1)
-    rest = rest[np.isfinite(theta[rest])]
-    if rest.size == 0 or idx.size == 0 or not np.all(np.isfinite(theta[idx])):
+    level = _rest_angle(theta, last_rest)
+    if level is None or idx.size == 0 or not np.all(np.isfinite(theta[idx])):
         return None
-    ref = float(theta[rest[-1]])
-    level = ref + float(np.median(np.remainder(theta[rest] - ref + np.pi, 2 * np.pi) - np.pi))
     turned = direction * (np.unwrap(np.r_[level, theta[idx]])[1:] - level)
     # the reading step: at most the smallest gap between the distinct angles read in the run,
     # and taken as 0.01° (an encoder's or resolver's) where the readings do not show one
