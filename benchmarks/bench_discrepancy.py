@@ -29,7 +29,9 @@ from generate import CASES, EVEN, MOTOR_8, ODD  # noqa: E402
 from motorid.bench.protocols import load_protocol, parse_protocol, read_toml  # noqa: E402
 from motorid.bench.simulate import simulate_campaign  # noqa: E402
 from motorid.bench.truth import Truth  # noqa: E402
-from motorid.discrepancy import catalog  # noqa: E402
+from motorid.physics import registry  # noqa: E402
+from motorid.physics.friction import StribeckFriction  # noqa: E402
+from motorid.physics.hydrodynamic import HydrodynamicTorque  # noqa: E402
 from motorid.discrepancy.select import diagnose  # noqa: E402
 from motorid.identify.extract import extract  # noqa: E402
 from motorid.spec import load_motor_spec, parse_motor_spec  # noqa: E402
@@ -41,7 +43,7 @@ SINGLE = ["stribeck_friction", "hydrodynamic_torque", "turbulent_leakage", "comp
           "misalignment_ripple", "torque_offset"]
 
 
-class GaussianStribeck(catalog.StribeckFriction):
+class GaussianStribeck(StribeckFriction):
     """Stribeck curve of another shape: exp(−(ω/ω_s)²), constant amplitude."""
 
     def running(self, params, spec, samples, ch):
@@ -49,7 +51,7 @@ class GaussianStribeck(catalog.StribeckFriction):
         return ch._replace(torque=ch.torque - samples.direction * self.param(params, "T_s") * shape)
 
 
-class PowerWindage(catalog.HydrodynamicTorque):
+class PowerWindage(HydrodynamicTorque):
     """Windage loss ∝ |ω|^1.7 instead of ω²."""
 
     def running(self, params, spec, samples, ch):
@@ -63,7 +65,7 @@ def _campaign(pistons, mechanisms: dict, seed, objects=None, protocols=None):
     mechs = []
     for mid, values in mechanisms.items():
         params.update({f"{mid}.{k}": v for k, v in values.items()})
-        mechs.append((objects or {}).get(mid, catalog.get(mid)))
+        mechs.append((objects or {}).get(mid, registry.get(mid)))
     spec = SPEC_9 if pistons % 2 else SPEC_8
     protos = protocols or [load_protocol(p) for p in PROTOCOLS]
     frame = simulate_campaign(protos, spec, Truth(params, tuple(mechs), "bench"), seed=seed).frame

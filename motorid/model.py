@@ -2,7 +2,7 @@
 
 Everything that simulates, fits, samples or searches for missing physics calls
 :func:`predict` (running samples) and :func:`predict_breakaway` (startability
-events).  Extra physics from the discrepancy catalog enters as *mechanisms*:
+events).  Extra physics (:mod:`motorid.physics.registry`) enters as *mechanisms*:
 objects that add their terms to the channels this module computes, never a
 second copy of the model.
 
@@ -13,8 +13,7 @@ MODEL.md: ``Kv``, ``KF``, ``KFS``, ``TFc``, ``Ks``, ``KL0``, ``KL_a1``,
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -23,18 +22,10 @@ import numpy as np
 from motorid import _jaxconfig  # noqa: F401
 from motorid._aot import cached_jit
 from motorid.physics import flow, torque
+from motorid.physics.base import Channels, ParameterInfo, Samples  # noqa: F401  (re-exported)
+from motorid.physics.flow import leakage_harmonics  # noqa: F401  (re-exported)
 from motorid.physics.kinematics import port_a_sum, port_a_sum_approx, ripple_coefficients
 from motorid.spec import MotorSpec  # noqa: F401  (re-exported)
-
-
-@dataclass(frozen=True)
-class ParameterInfo:
-    """What a parameter means: unit, words, sign constraint and a typical size."""
-
-    unit: str
-    meaning: str
-    positive: bool
-    typical: float
 
 
 BASE_PARAMETERS: dict[str, ParameterInfo] = {
@@ -71,29 +62,6 @@ def parameter_info(name: str, mechanisms: Sequence = ()) -> ParameterInfo:
         if name in mech.parameters:
             return mech.parameters[name]
     raise KeyError(f"unknown parameter '{name}'")
-
-
-class Samples(NamedTuple):
-    """Operating point of each sample, SI, all arrays of one shape.
-
-    theta [rad], speed ω [rad/s], acceleration α [rad/s²], p_a, p_b, p_case
-    [Pa gauge], viscosity μ [Pa·s], direction sgn ω [-] (±1; the run's direction
-    in a fit, so sensor noise at very low speed cannot flip friction), port_sum
-    S(θ) [-] (depends on no parameter, so it is computed once), temperature [°C]
-    and time [s] (for mechanisms that need them).
-    """
-
-    theta: jax.Array
-    speed: jax.Array
-    acceleration: jax.Array
-    p_a: jax.Array
-    p_b: jax.Array
-    p_case: jax.Array
-    viscosity: jax.Array
-    direction: jax.Array
-    port_sum: jax.Array
-    temperature: jax.Array
-    time: jax.Array
 
 
 def make_samples(spec: MotorSpec, theta, speed, p_a, p_b, p_case, viscosity, acceleration=None,
@@ -145,23 +113,6 @@ def _assemble_samples(pistons: int, coefficients, theta, speed, acceleration, p_
 _assemble_samples_jit = cached_jit(_assemble_samples)
 
 
-class Channels(NamedTuple):
-    """Predicted bench channels, SI: shaft torque to the load [N·m], flow into
-    port A, into port B and out of the case drain [m³/s]."""
-
-    torque: jax.Array
-    q_a: jax.Array
-    q_b: jax.Array
-    q_case: jax.Array
-
-
-def leakage_harmonics(params: dict, harmonics: int):
-    """(a_1..a_M), (b_1..b_M) of K_L(θ) from a parameter dict."""
-    a = [params.get(f"KL_a{m}", 0.0) for m in range(1, harmonics + 1)]
-    b = [params.get(f"KL_b{m}", 0.0) for m in range(1, harmonics + 1)]
-    return a, b
-
-
 def _harmonic_count(params: dict) -> int:
     return sum(1 for k in params if k.startswith("KL_a"))
 
@@ -191,7 +142,7 @@ def predict(params: dict, spec: MotorSpec, samples: Samples, mechanisms: Sequenc
     """Predicted running channels at every sample: the base model plus mechanisms.
 
     params : parameter dict (SI); spec : motor data; samples : :class:`Samples`
-    mechanisms : extra physics from :mod:`motorid.discrepancy.catalog`, each adding
+    mechanisms : extra physics from :mod:`motorid.physics.registry`, each adding
         its terms through ``mechanism.running(params, spec, samples, channels)``.
     """
     ch = base_channels(params, spec, samples)

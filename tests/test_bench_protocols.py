@@ -8,7 +8,6 @@ import subprocess
 import sys
 import time
 import tomllib
-import types
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,7 @@ import pytest
 from motorid.bench.protocols import load_protocol, parse_protocol
 from motorid.bench.simulate import simulate_campaign
 from motorid.bench.truth import load_truth, parse_truth
-from motorid.discrepancy.base import Mechanism
+from motorid.physics.base import Mechanism
 from motorid.errors import InputError
 from motorid.logs import PROTOCOLS
 from motorid.model import ParameterInfo
@@ -157,14 +156,13 @@ class Tilt(Mechanism):
     parameters = {"tilt.k": ParameterInfo("N·m", "test", True, 1.0)}
 
 
-def test_mechanisms_resolve_through_the_catalog(monkeypatch):
+def test_mechanisms_resolve_through_the_registry(monkeypatch):
+    from motorid.physics import registry
+
     data = {"parameters": BASE, "mechanisms": {"tilt": {"k": 2.0}}}
-    monkeypatch.setitem(sys.modules, "motorid.discrepancy.catalog", None)  # no catalog (yet)
-    with pytest.raises(InputError, match="unknown mechanism 'tilt'"):
+    with pytest.raises(InputError, match="unknown mechanism 'tilt'; known: stribeck_friction"):
         parse_truth(data, "t.toml")
-    catalog = types.ModuleType("motorid.discrepancy.catalog")
-    catalog.get = lambda mech_id: {"tilt": Tilt()}[mech_id]
-    monkeypatch.setitem(sys.modules, "motorid.discrepancy.catalog", catalog)
+    monkeypatch.setitem(registry.CATALOG, "tilt", Tilt())
     t = parse_truth(data, "t.toml")
     assert isinstance(t.mechanisms[0], Tilt) and t.params["tilt.k"] == 2.0
     with pytest.raises(InputError, match=r"t.toml \[mechanisms.nope\]: unknown mechanism 'nope'"):

@@ -16,7 +16,7 @@ from motorid import model
 from motorid.bench.protocols import parse_protocol
 from motorid.bench.simulate import simulate_campaign
 from motorid.bench.truth import Truth, parse_truth
-from motorid.discrepancy.base import Mechanism
+from motorid.physics.base import Mechanism
 from motorid.logs import FORMAT_COLUMNS, write_log
 from motorid.model import ParameterInfo
 from motorid.physics import torque as torque_physics
@@ -413,12 +413,13 @@ def test_mechanisms_enter_through_the_model(tmp_path):
         assert dp > breakaway_pressure(r.plan.shaft_angle, r.plan.load_torque, 7e5) + 2.0 * BAR
 
 
-def test_every_catalog_mechanism_round_trips_through_a_truth_file():
-    catalog = pytest.importorskip("motorid.discrepancy.catalog")
+def test_every_registered_mechanism_round_trips_through_a_truth_file():
+    from motorid.physics import registry
+
     protos = [protocol("cp"), parse_protocol(tomllib.loads(PROTOCOLS["st"].replace(
         "load_torque_Nm = [0.0, 60.0, 200.0]", "load_torque_Nm = [60.0]").replace(
         "[0.0, 7.0, 14.0, 21.0, 28.0, 35.0, 42.0]", "[0.0, 21.0]")), "st.toml"), protocol("ct")]
-    for mech in catalog.all_mechanisms():
+    for mech in registry.all_mechanisms():
         table = {name.split(".", 1)[1]: info.typical for name, info in mech.parameters.items()}
         truth = parse_truth({"parameters": TRUTH.params, "mechanisms": {mech.id: table}}, "truth.toml")
         assert [m.id for m in truth.mechanisms] == [mech.id]

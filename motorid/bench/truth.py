@@ -13,13 +13,12 @@ Schema (SI, names as in MODEL.md)::
     KL_b1 = 0.08       # [-]
     KAB = 2e-14        # [m³]
 
-    [mechanisms.<id>]  # optional: extra physics from motorid.discrepancy.catalog
+    [mechanisms.<id>]  # optional: extra physics from motorid.physics.registry
     <name> = value     # enters the parameter dict as "<id>.<name>"
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ from pathlib import Path
 from motorid.bench.protocols import read_toml
 from motorid.errors import InputError
 from motorid.model import BASE_PARAMETERS, parameter_info
+from motorid.physics import registry
 
 _HARMONIC_PREFIXES = ("KL_a", "KL_b")
 
@@ -47,22 +47,11 @@ class Truth:
 
 
 def resolve_mechanism(mech_id: str, where: str):
-    """The mechanism named ``mech_id`` in :mod:`motorid.discrepancy.catalog`."""
+    """The mechanism named ``mech_id`` in :mod:`motorid.physics.registry`; :class:`InputError` otherwise."""
     try:
-        catalog = importlib.import_module("motorid.discrepancy.catalog")
-    except ModuleNotFoundError as exc:
-        if exc.name != "motorid.discrepancy.catalog":
-            raise
-        raise InputError(f"{where}: unknown mechanism '{mech_id}' (no discrepancy catalog is installed)") from None
-    try:
-        mech = catalog.get(mech_id)
-    except InputError as exc:  # the catalog's own words (it names the known mechanisms)
+        return registry.get(mech_id)
+    except InputError as exc:  # the registry's own words (it names the known mechanisms)
         raise InputError(f"{where}: {exc}") from None
-    except (KeyError, LookupError, ValueError):
-        mech = None
-    if mech is None:
-        raise InputError(f"{where}: unknown mechanism '{mech_id}'")
-    return mech() if isinstance(mech, type) else mech
 
 
 def _value(table: dict, key: str, where: str) -> float:

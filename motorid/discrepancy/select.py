@@ -1,6 +1,6 @@
 """Name and model the missing physics: fit candidates, compare, keep what earns its place.
 
-Forward selection over the catalog (:mod:`motorid.discrepancy.catalog`):
+Forward selection over the catalog (the registry of mechanisms, :mod:`motorid.physics.registry`):
 
 1. fit the base model; :func:`~motorid.discrepancy.locate.locate` its residuals;
 2. if structure is found, fit the current model plus each candidate mechanism
@@ -23,6 +23,7 @@ import numpy as np
 
 from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
 from motorid.identify.least_squares import FitOptions, FitResult, fit_least_squares
+from motorid.physics.registry import all_mechanisms
 
 
 @dataclass
@@ -123,8 +124,6 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
              alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 3, cv_top: int = 1,
              max_mechanisms: int = 3, progress=None) -> Diagnosis:
     """Find, name and model what the base model leaves out (see module doc)."""
-    from motorid.discrepancy.catalog import all_mechanisms
-
     say = progress or (lambda msg: None)
     catalog = list(mechanisms) if mechanisms is not None else all_mechanisms()
     base = base or fit_least_squares(dataset, spec)

@@ -54,3 +54,10 @@ def net_flows(swept_a, leak_a, leak_b, cross):
     q_bn = -swept_a + leak_b - cross
     q_cn = leak_a + leak_b
     return q_an, q_bn, q_cn
+
+
+def leakage_harmonics(params: dict, harmonics: int):
+    """(a_1..a_M), (b_1..b_M) of K_L(θ) from a parameter dict."""
+    a = [params.get(f"KL_a{m}", 0.0) for m in range(1, harmonics + 1)]
+    b = [params.get(f"KL_b{m}", 0.0) for m in range(1, harmonics + 1)]
+    return a, b

@@ -1,4 +1,4 @@
-"""The discrepancy catalog: every mechanism's gradients, neutrality and physics claims."""
+"""The registry of extra mechanisms (motorid.physics): every mechanism's gradients, neutrality and physics claims."""
 
 import math
 import pickle
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from motorid import model
-from motorid.discrepancy import catalog
-from motorid.discrepancy.base import Mechanism
+from motorid.physics import registry
+from motorid.physics.base import Mechanism
 from motorid.errors import InputError
 from motorid.spec import MotorSpec
 
@@ -34,7 +34,7 @@ VALUES = {
 }
 REQUIRED = ["stribeck_friction", "hydrodynamic_torque", "turbulent_leakage", "compressibility_flow",
             "misalignment_ripple", "torque_offset"]
-ALL = list(catalog.CATALOG)
+ALL = list(registry.CATALOG)
 CHANNELS = ("torque", "q_a", "q_b", "q_case", "breakaway")
 
 
@@ -73,7 +73,7 @@ def _delta(mech, s, values=None):
 
 
 def test_values_cover_every_parameter():
-    names = {k for m in catalog.all_mechanisms() for k in m.parameters}
+    names = {k for m in registry.all_mechanisms() for k in m.parameters}
     assert names == set(VALUES)
 
 
@@ -82,7 +82,7 @@ def test_values_cover_every_parameter():
 
 @pytest.mark.parametrize("mid", ALL)
 def test_mechanism_describes_itself(mid):
-    mech = catalog.CATALOG[mid]
+    mech = registry.CATALOG[mid]
     assert isinstance(mech, Mechanism) and mech.id == mid
     assert mech.name and mech.reference and mech.signature
     assert mech.physics.count(". ") == 1 and mech.physics.endswith(".")  # two sentences
@@ -99,18 +99,18 @@ def test_mechanism_describes_itself(mid):
 
 
 def test_required_mechanisms_present_and_singletons():
-    assert set(REQUIRED) <= set(catalog.CATALOG)
-    assert len(catalog.CATALOG) > len(REQUIRED)
-    assert catalog.all_mechanisms() == list(catalog.CATALOG.values())
+    assert set(REQUIRED) <= set(registry.CATALOG)
+    assert len(registry.CATALOG) > len(REQUIRED)
+    assert registry.all_mechanisms() == list(registry.CATALOG.values())
     for mid in ALL:
-        mech = catalog.get(mid)
-        assert mech is catalog.CATALOG[mid] and hash(mech) == hash(catalog.get(mid))
+        mech = registry.get(mid)
+        assert mech is registry.CATALOG[mid] and hash(mech) == hash(registry.get(mid))
         assert pickle.loads(pickle.dumps(mech)) is mech
 
 
 def test_get_unknown_names_the_known_ones():
     with pytest.raises(InputError) as err:
-        catalog.get("coulomb_magic")
+        registry.get("coulomb_magic")
     msg = str(err.value)
     assert msg.startswith("unknown mechanism 'coulomb_magic'; known: ")
     for mid in ALL:
@@ -123,7 +123,7 @@ def test_get_unknown_names_the_known_ones():
 
 @pytest.mark.parametrize("mid", ALL)
 def test_gradients_match_central_differences(mid):
-    mech = catalog.CATALOG[mid]
+    mech = registry.CATALOG[mid]
     s = _samples()
     p = _params(mech)
     names = list(mech.parameters)
@@ -147,7 +147,7 @@ def test_gradients_match_central_differences(mid):
 
 @pytest.mark.parametrize("mid", ALL)
 def test_neutral_values_give_exactly_the_base_model(mid):
-    mech = catalog.CATALOG[mid]
+    mech = registry.CATALOG[mid]
     d = _delta(mech, _samples(), mech.neutral())
     for ch in CHANNELS:
         assert np.all(d[ch] == 0.0), ch
@@ -155,7 +155,7 @@ def test_neutral_values_give_exactly_the_base_model(mid):
 
 @pytest.mark.parametrize("mid", ALL)
 def test_jit_and_vmap_agree_with_eager(mid):
-    mech = catalog.CATALOG[mid]
+    mech = registry.CATALOG[mid]
     p = _params(mech)
     batch = [_samples(n=16, seed=k) for k in range(3)]
     def combined(s):  # one array that depends on every channel
@@ -170,7 +170,7 @@ def test_jit_and_vmap_agree_with_eager(mid):
 @pytest.mark.parametrize("mid", ALL)
 def test_typical_sizes_are_noticeable_but_modest(mid):
     """At typical values each mechanism moves its channels by 0.05-15 % over an 80 cm³/rev duty."""
-    mech = catalog.CATALOG[mid]
+    mech = registry.CATALOG[mid]
     w = np.array([0.3, 3, 30, 300, 1000, 3000]) * RPM
     dp = np.array([50.0, 150.0, 250.0]) * BAR
     ww, pp = np.meshgrid(np.r_[w, -w], dp)
@@ -195,7 +195,7 @@ def _fixed(speed, *, theta=None, p_a=20e6, p_b=1e6, p_c=0.1e6, mu=0.04):
 
 
 def test_stribeck_grows_as_speed_falls_opposes_motion_and_vanishes_fast():
-    mech = catalog.get("stribeck_friction")
+    mech = registry.get("stribeck_friction")
     w = np.geomspace(1e-3, 300.0, 40)
     up, down = _delta(mech, _fixed(w))["torque"], _delta(mech, _fixed(-w))["torque"]
     assert np.all(up <= 0) and np.all(up[w < 3.0] < 0) and np.all(np.diff(up) >= 0)  # opposes motion, shrinks
@@ -211,7 +211,7 @@ def test_stribeck_grows_as_speed_falls_opposes_motion_and_vanishes_fast():
 
 
 def test_hydrodynamic_torque_goes_as_speed_squared_without_viscosity():
-    mech = catalog.get("hydrodynamic_torque")
+    mech = registry.get("hydrodynamic_torque")
     w = np.array([10.0, 20.0, 100.0, 200.0, -100.0, -200.0])
     d = _delta(mech, _fixed(w))["torque"]
     np.testing.assert_allclose(d, -VALUES["hydrodynamic_torque.C_h"] * w * np.abs(w), rtol=1e-9)
@@ -220,7 +220,7 @@ def test_hydrodynamic_torque_goes_as_speed_squared_without_viscosity():
 
 
 def test_turbulent_leakage_goes_as_root_pressure_without_viscosity_and_balances_mass():
-    mech = catalog.get("turbulent_leakage")
+    mech = registry.get("turbulent_leakage")
     c = VALUES["turbulent_leakage.C_t"]
     dps = np.array([1e6, 4e6, 16e6])
     d = [_delta(mech, _fixed([5.0], p_a=0.1e6 + dp, p_b=0.1e6))["q_a"][0] for dp in dps]
@@ -237,7 +237,7 @@ def test_turbulent_leakage_goes_as_root_pressure_without_viscosity_and_balances_
 
 
 def test_compressibility_flow_is_absent_from_case_drain_and_goes_as_pressure_times_speed():
-    mech = catalog.get("compressibility_flow")
+    mech = registry.get("compressibility_flow")
     c = VALUES["compressibility_flow.C_c"]
     w = np.array([10.0, 20.0, -10.0, -20.0])
     d = _delta(mech, _fixed(w, p_a=20e6, p_b=1e6))
@@ -254,7 +254,7 @@ def test_compressibility_flow_is_absent_from_case_drain_and_goes_as_pressure_tim
 
 
 def test_misalignment_ripple_has_shaft_period_and_zero_mean():
-    mech = catalog.get("misalignment_ripple")
+    mech = registry.get("misalignment_ripple")
     theta = np.linspace(0, 2 * np.pi, 256, endpoint=False)
     d = _delta(mech, _fixed(np.full(256, 1.0), theta=theta))["torque"]
     shifted = _delta(mech, _fixed(np.full(256, 1.0), theta=theta + 2 * np.pi))["torque"]
@@ -270,7 +270,7 @@ def test_misalignment_ripple_has_shaft_period_and_zero_mean():
 
 
 def test_torque_offset_is_equal_in_both_directions_and_at_breakaway():
-    mech = catalog.get("torque_offset")
+    mech = registry.get("torque_offset")
     t0 = VALUES["torque_offset.T0"]
     s = _samples()
     d = _delta(mech, s)
@@ -281,7 +281,7 @@ def test_torque_offset_is_equal_in_both_directions_and_at_breakaway():
 
 
 def test_case_pressure_friction_follows_case_pressure_and_direction():
-    mech = catalog.get("case_pressure_friction")
+    mech = registry.get("case_pressure_friction")
     k = VALUES["case_pressure_friction.K_c"]
     w = np.array([5.0, -5.0])
     for p_c in (0.5e6, 1e6):
@@ -295,7 +295,7 @@ def test_case_pressure_friction_follows_case_pressure_and_direction():
 
 
 def test_pressure_viscosity_matches_the_barus_gap_integral():
-    mech = catalog.get("pressure_viscosity")
+    mech = registry.get("pressure_viscosity")
     a = VALUES["pressure_viscosity.alpha"]
     s = _samples()
     d = _delta(mech, s)
