@@ -35,10 +35,9 @@ from motorid.errors import InputError
 from motorid.identify.least_squares import (RUNNING_CHANNELS, _Ctx, _normal_equations, bucket, pad,
                                             pad_samples)
 from motorid.model import Samples
+from motorid.units import PA_PER_BAR, RAD_S_PER_RPM
 
 CHUNK = 1 << 16  # samples per Jacobian block
-BAR = 1e5
-RPM = 2.0 * math.pi / 60.0
 
 
 # ----------------------------------------------------------------------------
@@ -205,12 +204,12 @@ def constant_speed_candidate(spec, speed_rpm: float, dp_bar: float, direction: i
     repo's protocol (10 Hz at 0.3 rpm … 100 Hz from 30 rpm)."""
     if sample_rate_hz is None:
         sample_rate_hz = 10.0 if speed_rpm <= 0.5 else 20.0 if speed_rpm <= 2 else 50.0 if speed_rpm <= 20 else 100.0
-    w = speed_rpm * RPM
+    w = speed_rpm * RAD_S_PER_RPM
     t_run = max(duration_s, revolutions * 2 * math.pi / w)
     n = int(t_run * sample_rate_hz) + 1
     t = np.arange(n) / sample_rate_hz
-    p_a, p_b = _ports(direction, dp_bar * BAR, back_bar * BAR)
-    s = model.make_samples(spec, direction * w * t, direction * w, p_a, p_b, case_bar * BAR,
+    p_a, p_b = _ports(direction, dp_bar * PA_PER_BAR, back_bar * PA_PER_BAR)
+    s = model.make_samples(spec, direction * w * t, direction * w, p_a, p_b, case_bar * PA_PER_BAR,
                            _viscosity(spec, oil_temp), direction=float(direction), temperature=oil_temp, time=t)
     dirw = "+" if direction > 0 else "−"
     return Candidate("ISO 4392-1 constant speed", f"{speed_rpm:g} rpm, ΔP {dp_bar:g} bar, dir {dirw}, {n} samples",
@@ -228,21 +227,21 @@ def startability_candidate(spec, params: dict, load_nm: float, direction: int, a
     mu = _viscosity(spec, oil_temp)
 
     def held(dp):
-        p_a, p_b = _ports(direction, dp, back_bar * BAR)
-        ev = model.make_samples(spec, th, 0.0, p_a, p_b, case_bar * BAR, mu, direction=float(direction),
+        p_a, p_b = _ports(direction, dp, back_bar * PA_PER_BAR)
+        ev = model.make_samples(spec, th, 0.0, p_a, p_b, case_bar * PA_PER_BAR, mu, direction=float(direction),
                                 temperature=oil_temp)
         return np.asarray(model.predict_breakaway(model.as_jax(params), spec, ev)), ev
 
     h0, _ = held(0.0)
-    h1, _ = held(100 * BAR)
-    slope = (h1 - h0) / (100 * BAR)
+    h1, _ = held(100 * PA_PER_BAR)
+    slope = (h1 - h0) / (100 * PA_PER_BAR)
     with np.errstate(divide="ignore", invalid="ignore"):
         dp = (direction * load_nm - h0) / slope
-    ok = np.isfinite(dp) & (dp > 0) & (dp < 600 * BAR)
+    ok = np.isfinite(dp) & (dp > 0) & (dp < 600 * PA_PER_BAR)
     if not ok.any():
         return None
-    p_a, p_b = _ports(direction, dp[ok], back_bar * BAR)
-    ev = model.make_samples(spec, th[ok], 0.0, p_a, p_b, case_bar * BAR, mu, direction=float(direction),
+    p_a, p_b = _ports(direction, dp[ok], back_bar * PA_PER_BAR)
+    ev = model.make_samples(spec, th[ok], 0.0, p_a, p_b, case_bar * PA_PER_BAR, mu, direction=float(direction),
                             temperature=oil_temp)
     dirw = "+" if direction > 0 else "−"
     return Candidate("ISO 4392-2 startability",

@@ -19,25 +19,11 @@ import pandas as pd
 from pandas.api.types import union_categoricals
 
 from motorid._atomic import write_bytes_atomic
-
 from motorid.errors import InputError
+from motorid.units import FORMAT_COLUMNS, SI_COLUMNS  # noqa: F401  (re-exported)
+from motorid.units import (M3_PER_US_GALLON, M3S_PER_LPM, NM_PER_LBF_FT, PA_PER_BAR, PA_PER_PSI, RAD_PER_DEG,
+                           RAD_S_PER_RPM)
 
-# canonical SI column  ← file column in the format's own units, factor to SI
-FORMAT_COLUMNS = {
-    "time_s": ("time_s", 1.0),
-    "theta_rad": ("shaft_angle_deg", np.pi / 180.0),
-    "speed_rad_s": ("speed_rpm", 2.0 * np.pi / 60.0),
-    "torque_Nm": ("torque_Nm", 1.0),
-    "p_a_Pa": ("p_a_bar", 1e5),
-    "p_b_Pa": ("p_b_bar", 1e5),
-    "p_case_Pa": ("p_case_bar", 1e5),
-    "q_a_m3_s": ("q_a_lpm", 1e-3 / 60.0),
-    "q_b_m3_s": ("q_b_lpm", 1e-3 / 60.0),
-    "q_case_m3_s": ("q_case_lpm", 1e-3 / 60.0),
-    "oil_temp_C": ("oil_temp_C", 1.0),
-    "viscosity_Pa_s": ("viscosity_mPas", 1e-3),
-}
-SI_COLUMNS = ["run_id", "protocol", *FORMAT_COLUMNS]
 VISCOSITY_FROM_OIL = "viscosity_from_oil_model"  # frame column: True where μ came from oil_temp_C and the spec
 PROTOCOLS = ("constant_speed", "constant_pressure", "startability", "constant_flow", "constant_torque")
 
@@ -99,24 +85,20 @@ def write_log(frame: pd.DataFrame, path, full_precision: bool = False) -> Path:
 # confuse units here because the quantity fixes the family: "mpa" of a pressure is
 # MPa, "mpas" of a viscosity is mPa·s.
 
-_PSI = 6894.757293168361  # Pa per lbf/in²
-_US_GALLON = 3.785411784e-3  # m³
-_LBF_FT = 1.3558179483314004  # N·m per lbf·ft
-
 _TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "min": 60.0, "h": 3600.0}
-_ANGLE_UNITS = {"rad": 1.0, "deg": np.pi / 180.0, "degree": np.pi / 180.0, "degrees": np.pi / 180.0,
+_ANGLE_UNITS = {"rad": 1.0, "deg": RAD_PER_DEG, "degree": RAD_PER_DEG, "degrees": RAD_PER_DEG,
                 "rev": 2.0 * np.pi}
-_SPEED_UNITS = {"rad_s": 1.0, "rpm": 2.0 * np.pi / 60.0, "rev_min": 2.0 * np.pi / 60.0,
-                "r_min": 2.0 * np.pi / 60.0, "1_min": 2.0 * np.pi / 60.0, "deg_s": np.pi / 180.0,
+_SPEED_UNITS = {"rad_s": 1.0, "rpm": RAD_S_PER_RPM, "rev_min": RAD_S_PER_RPM,
+                "r_min": RAD_S_PER_RPM, "1_min": RAD_S_PER_RPM, "deg_s": RAD_PER_DEG,
                 "rps": 2.0 * np.pi, "rev_s": 2.0 * np.pi, "hz": 2.0 * np.pi}
-_TORQUE_UNITS = {"nm": 1.0, "n_m": 1.0, "knm": 1e3, "kn_m": 1e3, "lbf_ft": _LBF_FT, "ft_lbf": _LBF_FT,
-                 "lbf_in": _LBF_FT / 12.0, "in_lbf": _LBF_FT / 12.0}
-_PRESSURE_UNITS = {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": 1e5, "barg": 1e5, "bar_g": 1e5,
-                   "mbar": 1e2, "psi": _PSI, "psig": _PSI}
-_FLOW_UNITS = {"m3_s": 1.0, "m3_h": 1.0 / 3600.0, "l_s": 1e-3, "lps": 1e-3, "lpm": 1e-3 / 60.0,
-               "l_min": 1e-3 / 60.0, "ml_s": 1e-6, "ml_min": 1e-6 / 60.0, "cm3_s": 1e-6,
-               "cm3_min": 1e-6 / 60.0, "cc_min": 1e-6 / 60.0, "gpm": _US_GALLON / 60.0,
-               "usgpm": _US_GALLON / 60.0, "gal_min": _US_GALLON / 60.0, "m3_min": 1.0 / 60.0,
+_TORQUE_UNITS = {"nm": 1.0, "n_m": 1.0, "knm": 1e3, "kn_m": 1e3, "lbf_ft": NM_PER_LBF_FT, "ft_lbf": NM_PER_LBF_FT,
+                 "lbf_in": NM_PER_LBF_FT / 12.0, "in_lbf": NM_PER_LBF_FT / 12.0}
+_PRESSURE_UNITS = {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": PA_PER_BAR, "barg": PA_PER_BAR, "bar_g": PA_PER_BAR,
+                   "mbar": 1e2, "psi": PA_PER_PSI, "psig": PA_PER_PSI}
+_FLOW_UNITS = {"m3_s": 1.0, "m3_h": 1.0 / 3600.0, "l_s": 1e-3, "lps": 1e-3, "lpm": M3S_PER_LPM,
+               "l_min": M3S_PER_LPM, "ml_s": 1e-6, "ml_min": 1e-6 / 60.0, "cm3_s": 1e-6,
+               "cm3_min": 1e-6 / 60.0, "cc_min": 1e-6 / 60.0, "gpm": M3_PER_US_GALLON / 60.0,
+               "usgpm": M3_PER_US_GALLON / 60.0, "gal_min": M3_PER_US_GALLON / 60.0, "m3_min": 1.0 / 60.0,
                "l_h": 1e-3 / 3600.0, "lph": 1e-3 / 3600.0, "dm3_min": 1e-3 / 60.0, "dm3_s": 1e-3}
 _TEMPERATURE_UNITS = {"c": lambda x: x, "degc": lambda x: x, "celsius": lambda x: x,
                       "k": lambda x: x - 273.15, "kelvin": lambda x: x - 273.15,

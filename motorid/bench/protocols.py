@@ -72,10 +72,8 @@ from motorid.bench.sensors import Sensors, parse_sensors
 from motorid.errors import InputError
 from motorid.logs import PROTOCOLS
 from motorid.spec import _number, read_toml  # noqa: F401  (read_toml is re-exported)
+from motorid.units import M3S_PER_LPM, PA_PER_BAR, RAD_S_PER_RPM
 
-RPM = 2.0 * math.pi / 60.0  # [rad/s per rpm]
-BAR = 1e5  # [Pa per bar]
-LPM = 1e-3 / 60.0  # [m³/s per L/min]
 
 #: which [set_points] lists each procedure sweeps, outermost first (after oil_temp_C, directions)
 SWEEPS = {
@@ -98,11 +96,11 @@ _TIMING = {
                      "max_pressure_bar", "start_pressure_bar"),
 }
 _SET_POINT_LIMITS = {  # key: (low, low_open, high, SI factor)
-    "speed_rpm": (0.0, True, 20000.0, RPM),
-    "pressure_difference_bar": (0.0, True, 2000.0, BAR),
+    "speed_rpm": (0.0, True, 20000.0, RAD_S_PER_RPM),
+    "pressure_difference_bar": (0.0, True, 2000.0, PA_PER_BAR),
     "shaft_angle_deg": (-3600.0, False, 3600.0, math.pi / 180.0),
     "load_torque_Nm": (0.0, False, 1e6, 1.0),
-    "flow_lpm": (0.0, True, 1e5, LPM),
+    "flow_lpm": (0.0, True, 1e5, M3S_PER_LPM),
 }
 #: most samples one protocol may ask for (a typo in a rate or speed should not fill a disk)
 MAX_SAMPLES = 5_000_000
@@ -114,9 +112,9 @@ class Conditions:
     drain flow [Pa], case pressure rise per drain flow [Pa/(m³/s)], oil
     temperature drift [°C/s] and start tolerance [°C]."""
 
-    back_pressure: float = 7.0 * BAR
-    case_pressure: float = 0.7 * BAR
-    case_drain_resistance: float = 0.05 * BAR / LPM
+    back_pressure: float = 7.0 * PA_PER_BAR
+    case_pressure: float = 0.7 * PA_PER_BAR
+    case_drain_resistance: float = 0.05 * PA_PER_BAR / M3S_PER_LPM
     temp_drift: float = 0.2 / 60.0
     temp_tolerance: float = 0.5
 
@@ -131,7 +129,7 @@ class Dynamometer:
     speed_ripple_freq: float = 1.5
     speed_ripple_per_rev: float = 0.001
     load_inertia: float = 0.5
-    max_speed: float = 10.0 * RPM
+    max_speed: float = 10.0 * RAD_S_PER_RPM
 
 
 @dataclass(frozen=True)
@@ -156,10 +154,10 @@ class Timing:
     duration: float = 2.0
     revolutions: float = 0.0
     settle: float = 1.0
-    ramp_rate: float = 2.5 * BAR
+    ramp_rate: float = 2.5 * PA_PER_BAR
     hold: float = 0.5
     after_breakaway: float = 1.0
-    max_pressure: float = 400.0 * BAR
+    max_pressure: float = 400.0 * PA_PER_BAR
     start_pressure: float | None = None
 
 
@@ -188,11 +186,11 @@ class RunPlan:
         """The set point in the log's units, for a manifest."""
         d = {"direction": "positive" if self.direction > 0 else "negative",
              "oil_temp_C": self.oil_temp, "sample_rate_Hz": self.sample_rate}
-        for name, (key, factor) in {"speed": ("speed_rpm", RPM),
-                                    "pressure_difference": ("pressure_difference_bar", BAR),
+        for name, (key, factor) in {"speed": ("speed_rpm", RAD_S_PER_RPM),
+                                    "pressure_difference": ("pressure_difference_bar", PA_PER_BAR),
                                     "shaft_angle": ("shaft_angle_deg", math.pi / 180.0),
                                     "load_torque": ("load_torque_Nm", 1.0),
-                                    "flow": ("flow_lpm", LPM)}.items():
+                                    "flow": ("flow_lpm", M3S_PER_LPM)}.items():
             v = getattr(self, name)
             if v is not None:
                 d[key] = v / factor
@@ -278,16 +276,16 @@ _TIMING_KEYS = {
     "duration_s": ("duration", 1.0, 0.0, True, 1e5),
     "revolutions": ("revolutions", 1.0, 0.0, False, 1e4),
     "settle_s": ("settle", 1.0, 0.0, False, 100.0),
-    "ramp_rate_bar_s": ("ramp_rate", BAR, 0.0, True, 1e4),
+    "ramp_rate_bar_s": ("ramp_rate", PA_PER_BAR, 0.0, True, 1e4),
     "hold_s": ("hold", 1.0, 0.0, False, 1e4),
     "after_breakaway_s": ("after_breakaway", 1.0, 0.0, True, 1e3),
-    "max_pressure_bar": ("max_pressure", BAR, 0.0, True, 2000.0),
-    "start_pressure_bar": ("start_pressure", BAR, 0.0, False, 2000.0),
+    "max_pressure_bar": ("max_pressure", PA_PER_BAR, 0.0, True, 2000.0),
+    "start_pressure_bar": ("start_pressure", PA_PER_BAR, 0.0, False, 2000.0),
 }
 _CONDITIONS_KEYS = {
-    "back_pressure_bar": ("back_pressure", BAR, 0.0, False, 100.0),
-    "case_pressure_bar": ("case_pressure", BAR, 0.0, False, 20.0),
-    "case_drain_resistance_bar_per_lpm": ("case_drain_resistance", BAR / LPM, 0.0, False, 10.0),
+    "back_pressure_bar": ("back_pressure", PA_PER_BAR, 0.0, False, 100.0),
+    "case_pressure_bar": ("case_pressure", PA_PER_BAR, 0.0, False, 20.0),
+    "case_drain_resistance_bar_per_lpm": ("case_drain_resistance", PA_PER_BAR / M3S_PER_LPM, 0.0, False, 10.0),
     "temp_drift_C_per_min": ("temp_drift", 1.0 / 60.0, -10.0, False, 10.0),
     "temp_tolerance_C": ("temp_tolerance", 1.0, 0.0, False, 10.0),
 }
@@ -296,7 +294,7 @@ _DYNAMOMETER_KEYS = {
     "speed_ripple_Hz": ("speed_ripple_freq", 1.0, 0.0, False, 1e4),
     "speed_ripple_per_rev": ("speed_ripple_per_rev", 1.0, 0.0, False, 0.2),
     "load_inertia_kg_m2": ("load_inertia", 1.0, 0.0, False, 1e4),
-    "max_speed_rpm": ("max_speed", RPM, 0.0, True, 20000.0),
+    "max_speed_rpm": ("max_speed", RAD_S_PER_RPM, 0.0, True, 20000.0),
 }
 _SUPPLY_KEYS = {
     "pressure_ripple": ("pressure_ripple", 1.0, 0.0, False, 0.2),
@@ -304,7 +302,7 @@ _SUPPLY_KEYS = {
     "flow_ripple": ("flow_ripple", 1.0, 0.0, False, 0.2),
     "flow_ripple_Hz": ("flow_ripple_freq", 1.0, 0.0, False, 1e4),
     "volume_L": ("volume", 1e-3, 0.0, True, 1e4),
-    "bulk_modulus_bar": ("bulk_modulus", BAR, 0.0, True, 1e6),
+    "bulk_modulus_bar": ("bulk_modulus", PA_PER_BAR, 0.0, True, 1e6),
 }
 
 

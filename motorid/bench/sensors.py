@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from motorid.errors import InputError
-from motorid.logs import FORMAT_COLUMNS
+from motorid.units import FORMAT_COLUMNS
 from motorid.spec import _number
 
 #: log column → canonical SI column, for the channels a sensor reads

@@ -37,7 +37,7 @@ from motorid.bench.kernels import evaluate
 from motorid.bench.protocols import Protocol, RunPlan, running_duration
 from motorid.bench.truth import Truth
 from motorid.errors import InputError
-from motorid.logs import SI_COLUMNS
+from motorid.units import FORMAT_COLUMNS, SI_COLUMNS
 from motorid.model import MotorSpec
 
 #: internal integration rate of the startability transient [Hz] (at least)
@@ -46,8 +46,7 @@ STARTABILITY_RATE = 2000.0
 STEPS_PER_RIPPLE = 20
 STEPS_PER_RESONANCE = 40
 #: channels the simulator computes for each sample, canonical SI names
-_TRUE = ("time_s", "theta_rad", "speed_rad_s", "torque_Nm", "p_a_Pa", "p_b_Pa", "p_case_Pa",
-         "q_a_m3_s", "q_b_m3_s", "q_case_m3_s", "oil_temp_C", "viscosity_Pa_s")
+_TRUE = tuple(FORMAT_COLUMNS)
 
 
 @dataclass

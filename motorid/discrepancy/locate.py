@@ -28,11 +28,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-RPM = 60.0 / (2 * np.pi)
+from motorid.units import LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S
+
 CHANNEL_WORDS = {"torque": "running torque", "q_a": "port A flow", "q_b": "port B flow",
                  "q_case": "case-drain flow", "breakaway": "breakaway (held) torque"}
-UNIT = {"torque": ("N·m", 1.0), "breakaway": ("N·m", 1.0), "q_a": ("L/min", 6e4),
-        "q_b": ("L/min", 6e4), "q_case": ("L/min", 6e4)}
+UNIT = {"torque": ("N·m", 1.0), "breakaway": ("N·m", 1.0), "q_a": ("L/min", LPM_PER_M3S),
+        "q_b": ("L/min", LPM_PER_M3S), "q_case": ("L/min", LPM_PER_M3S)}
 
 
 @dataclass
@@ -160,11 +161,11 @@ def _quantile_groups(x, n_groups, log=False, fmt=str):
 
 
 def _rpm(v):
-    return f"{v * RPM:.3g} rpm"
+    return f"{v * RPM_PER_RAD_S:.3g} rpm"
 
 
 def _bar(v):
-    return f"{v / 1e5:.4g} bar"
+    return f"{v / PA_PER_BAR:.4g} bar"
 
 
 def _mpas(v):

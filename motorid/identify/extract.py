@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from motorid.errors import InputError
-from motorid.logs import SI_COLUMNS
+from motorid.units import SI_COLUMNS
 from motorid.model import Samples, make_samples
 from motorid.spec import MotorSpec
 

@@ -23,11 +23,9 @@ import numpy as np
 from motorid import model
 from motorid.errors import InputError
 from motorid.identify.least_squares import _robust_std
+from motorid.units import PA_PER_BAR, RUNNING_CHANNELS
 
-RPM = 60.0 / (2.0 * math.pi)  # rad/s → rpm
-BAR = 1e5  # Pa per bar
-LPM = 6e4  # m³/s → L/min
-RUNNING = ("torque", "q_a", "q_b", "q_case")
+RUNNING = RUNNING_CHANNELS
 DRAWS = 200  # parameter draws for the bands
 OUTLIER_SIGMA = 5.0  # beyond this many σ a residual is flagged (the fit's default)
 
@@ -449,14 +447,14 @@ class Level:
 
     @property
     def label(self) -> str:
-        return f"ΔP {self.dp / BAR:.0f} bar, {self.temperature:.0f} °C"
+        return f"ΔP {self.dp / PA_PER_BAR:.0f} bar, {self.temperature:.0f} °C"
 
 
 def pressure_levels(runs: list[Run]) -> list[Level]:
     """Group running runs by |ΔP| (within 2 % or 2 bar) and temperature (within 3 °C)."""
     if not runs:
         return []
-    dp_label = cluster([r.dp for r in runs], lambda v: max(0.02 * v, 2 * BAR))
+    dp_label = cluster([r.dp for r in runs], lambda v: max(0.02 * v, 2 * PA_PER_BAR))
     levels = []
     for lab in np.unique(dp_label):
         members = [r for r, l in zip(runs, dp_label) if l == lab]
@@ -487,7 +485,7 @@ def noise_by_run(rd: ReportData) -> dict:
 def reference_conditions(rd: ReportData) -> dict:
     """Back pressure, case pressure, temperature and viscosity the derived figures use."""
     s = rd.dataset.running if rd.has_running else None
-    ref = {"p_low": 7 * BAR, "p_case": 0.7 * BAR, "temperature": 40.0}
+    ref = {"p_low": 7 * PA_PER_BAR, "p_case": 0.7 * PA_PER_BAR, "temperature": 40.0}
     if s is not None:
         p_low = np.minimum(np.asarray(s.p_a), np.asarray(s.p_b))
         ref.update(p_low=float(np.nanmedian(p_low)), p_case=float(np.nanmedian(np.asarray(s.p_case))),

@@ -9,6 +9,8 @@ from __future__ import annotations
 import html
 import math
 
+from motorid.units import LPM_PER_M3S
+
 MINUS = "\u2212"
 # symbols of the parameters as MODEL.md writes them
 SYMBOLS = {
@@ -88,9 +90,9 @@ def attr(x) -> str:
 # channel → (display name, practical unit, factor from SI)
 CHANNELS = {
     "torque": ("running torque", "N·m", 1.0),
-    "q_a": ("port A flow", "L/min", 6e4),
-    "q_b": ("port B flow", "L/min", 6e4),
-    "q_case": ("case-drain flow", "L/min", 6e4),
+    "q_a": ("port A flow", "L/min", LPM_PER_M3S),
+    "q_b": ("port B flow", "L/min", LPM_PER_M3S),
+    "q_case": ("case-drain flow", "L/min", LPM_PER_M3S),
     "breakaway": ("breakaway (held) torque", "N·m", 1.0),
 }
 

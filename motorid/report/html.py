@@ -20,7 +20,8 @@ import numpy as np
 from motorid._atomic import write_bytes_atomic
 from motorid.report import format as fmt
 from motorid.report import plots
-from motorid.report.evaluate import BAR, RPM, Ensemble, ReportData, gather, noise_by_run
+from motorid.report.evaluate import Ensemble, ReportData, gather, noise_by_run
+from motorid.units import PA_PER_BAR, RPM_PER_RAD_S
 
 REPORT_FILE = "report.html"
 
@@ -402,8 +403,8 @@ def _run_table(runs: list) -> str:
         f = lambda k, s=1.0, d=4: fmt.number(None if r.get(k) is None else r[k] * s, d)  # noqa: E731
         rows.append(f"<tr><td>{esc(r.get('run'))}</td><td>{esc(r.get('protocol'))}</td>"
                     f"<td class=\"num\">{r.get('n_samples', '')}</td><td class=\"num\">{r.get('n_steady', '')}</td>"
-                    f"<td class=\"num\">{f('speed_median_rad_s', RPM)}</td><td class=\"num\">{f('dp_median_Pa', 1 / BAR)}</td>"
-                    f"<td class=\"num\">{f('psum_median_Pa', 1 / BAR)}</td><td class=\"num\">{f('temp_median_C', 1, 3)}</td>"
+                    f"<td class=\"num\">{f('speed_median_rad_s', RPM_PER_RAD_S)}</td><td class=\"num\">{f('dp_median_Pa', 1 / PA_PER_BAR)}</td>"
+                    f"<td class=\"num\">{f('psum_median_Pa', 1 / PA_PER_BAR)}</td><td class=\"num\">{f('temp_median_C', 1, 3)}</td>"
                     f"<td>{esc(r.get('excluded') or '')}</td></tr>")
     return ("<details><summary>Every run (" + str(len(runs)) + ")</summary><table id=\"run-table\"><tr><th>run</th>"
             "<th>protocol</th><th>samples</th><th>steady</th><th>speed [rpm]</th><th>ΔP [bar]</th>"
@@ -566,7 +567,7 @@ def _efficiency(rd: ReportData, figs: dict) -> str:
         x, y, hm, v, t = f.facts["point"]
         cap = ("The fitted model over speed and pressure difference, averaged over a shaft revolution, with oil at "
                f"{ref['temperature']:.1f} °C (μ = {fmt.number(ref['viscosity'] * 1e3, 3)} mPa·s, the median of the "
-               f"data), back pressure {ref['p_low'] / BAR:.1f} bar and case pressure {ref['p_case'] / BAR:.2f} bar. "
+               f"data), back pressure {ref['p_low'] / PA_PER_BAR:.1f} bar and case pressure {ref['p_case'] / PA_PER_BAR:.2f} bar. "
                "η_hm = T/(DΔP/2π); η_v = (Dω/2π)/Q_A; η_t = η_hm·η_v. Dots: the operating points tested; outside "
                f"them the maps extrapolate the model. At {x:.3g} rpm and {y:.0f} bar: η_hm {hm:.4f}, η_v {v:.4f}, "
                f"η_t {t:.4f}.")

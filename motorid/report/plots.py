@@ -22,9 +22,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from motorid.report.evaluate import (  # noqa: E402
-    BAR, LPM, RPM, Ensemble, ReportData, cluster, concat_samples, grid_samples, pressure_levels,
-    reference_conditions, revolution, running_runs,
+    Ensemble, ReportData, cluster, concat_samples, grid_samples, pressure_levels, reference_conditions, revolution,
+    running_runs,
 )
+from motorid.units import LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S  # noqa: E402
 
 DPI = 88
 MAX_POINTS = 4000  # residual points drawn per channel (outliers always drawn)
@@ -121,7 +122,7 @@ def plot_torque_speed(rd: ReportData, ens: Ensemble) -> Plot | None:
         g = w.size
         t_c, t_lo, t_hi = d * c[0], d * lo[0], d * hi[0]
         ideal = D * lev.dp / (2 * np.pi)
-        x = w * RPM
+        x = w * RPM_PER_RAD_S
         ls = "-" if d > 0 else "--"
         label = lev.label if d > 0 or all(r.direction < 0 for r in lev.runs) else None
         axes[0].plot(x, t_c[:g], ls, color=col, lw=1.2, label=label)
@@ -130,7 +131,7 @@ def plot_torque_speed(rd: ReportData, ens: Ensemble) -> Plot | None:
         _band(axes[1], x, ideal - t_lo[:g], ideal - t_hi[:g], col)
         band_max = max(band_max, float(np.max(np.abs(t_hi - t_lo))) / 2)
         y = t_c[g:] + d * np.array([r.mean_resid["torque"] for r in rs])
-        xr = np.array([abs(r.speed) for r in rs]) * RPM
+        xr = np.array([abs(r.speed) for r in rs]) * RPM_PER_RAD_S
         mk = dict(marker="o" if d > 0 else "s", ms=4.5, ls="none", mec=col,
                   mfc=col if d > 0 else "white", mew=1.0)
         axes[0].plot(xr, y, **mk)
@@ -178,17 +179,17 @@ def plot_flows_speed(rd: ReportData, ens: Ensemble) -> Plot | None:
             ax_out: (swept + c[i_out], swept + lo[i_out], swept + hi[i_out], ch_out, 1.0),
             ax_case: (c[3], lo[3], hi[3], "q_case", 1.0),
         }
-        x = w * RPM
-        xr = np.array([abs(r.speed) for r in rs]) * RPM
+        x = w * RPM_PER_RAD_S
+        xr = np.array([abs(r.speed) for r in rs]) * RPM_PER_RAD_S
         ls = "-" if d > 0 else "--"
         label = lev.label if d > 0 or all(r.direction < 0 for r in lev.runs) else None
         for ax, (cc, ll, hh, ch, _) in series.items():
-            ax.plot(x, cc[:g] * LPM, ls, color=col, lw=1.2, label=label if ax is ax_in else None)
-            _band(ax, x, ll[:g] * LPM, hh[:g] * LPM, col)
+            ax.plot(x, cc[:g] * LPM_PER_M3S, ls, color=col, lw=1.2, label=label if ax is ax_in else None)
+            _band(ax, x, ll[:g] * LPM_PER_M3S, hh[:g] * LPM_PER_M3S, col)
             y = cc[g:] + np.array([r.mean_resid[ch] for r in rs])
-            ax.plot(xr, y * LPM, marker="o" if d > 0 else "s", ms=4.5, ls="none", mec=col,
+            ax.plot(xr, y * LPM_PER_M3S, marker="o" if d > 0 else "s", ms=4.5, ls="none", mec=col,
                     mfc=col if d > 0 else "white")
-            band_max = max(band_max, float(np.max(np.abs(hh - ll))) / 2 * LPM)
+            band_max = max(band_max, float(np.max(np.abs(hh - ll))) / 2 * LPM_PER_M3S)
     ax_in.set_yscale("log")
     titles = {ax_in: ("flow into the inlet port", "inlet flow [L/min]"),
               ax_loss: ("inlet flow beyond the swept flow D|n|", "Q_in − D|ω|/2π [L/min]"),
@@ -252,7 +253,7 @@ def plot_ripple(rd: ReportData, ens: Ensemble) -> Plot | None:
         start += theta.size + r.samples.size
         th = np.degrees(np.mod(cols["theta"][r.samples], 2 * np.pi))
         for j, (ch, row, factor, sig, unit) in enumerate((("torque", 0, 1.0, sig_t, "N·m"),
-                                                          ("q_case", 3, LPM, sig_c, "L/min"))):
+                                                          ("q_case", 3, LPM_PER_M3S, sig_c, "L/min"))):
             ax = axes[i, j]
             meas = (center[row, at] + rd.resid[ch][r.samples]) * factor
             ax.plot(th, meas, ".", ms=2.0, color="#1f77b4", alpha=0.5, label="data", rasterized=True)
@@ -265,7 +266,7 @@ def plot_ripple(rd: ReportData, ens: Ensemble) -> Plot | None:
             ax.set_xticks(np.arange(0, 361, 45))
             name = "shaft torque" if ch == "torque" else "case-drain flow"
             ax.set_ylabel(f"{name} [{unit}]")
-            ax.set_title(f"{name} at {abs(r.speed) * RPM:.3g} rpm, ΔP {r.dp / BAR:.0f} bar")
+            ax.set_title(f"{name} at {abs(r.speed) * RPM_PER_RAD_S:.3g} rpm, ΔP {r.dp / PA_PER_BAR:.0f} bar")
             if i == len(chosen) - 1:
                 ax.set_xlabel("shaft angle θ [deg]")
     axes[0, 1].legend(loc="upper right", frameon=True, framealpha=0.8)
@@ -316,13 +317,13 @@ def plot_breakaway(rd: ReportData, ens: Ensemble) -> Plot | None:
     env = grid_samples(rd.spec, th[None, :], 0.0, p_out + dps[:, None], p_out, p_case, mu, 1.0, temp)
     c_env, _, _ = ens.breakaway(env, band=False)
     c_env = c_env.reshape(dps.size, th.size)
-    ax.fill_between(dps / BAR, c_env.min(1), c_env.max(1), color="#999999", alpha=0.35, lw=0,
+    ax.fill_between(dps / PA_PER_BAR, c_env.min(1), c_env.max(1), color="#999999", alpha=0.35, lw=0,
                     label="model over all shaft angles")
     for sel, mk, name in ((pos, "o", "data, positive direction"), (neg, "s", "data, negative direction")):
         if sel.any():
-            ax.plot(e["dp"][sel] / BAR, (e["d"] * e["held"])[sel], mk, ms=4.5, color="#1f77b4",
+            ax.plot(e["dp"][sel] / PA_PER_BAR, (e["d"] * e["held"])[sel], mk, ms=4.5, color="#1f77b4",
                     mfc="#1f77b4" if mk == "o" else "white", label=name)
-    ax.plot(e["dp"][ok] / BAR, (e["d"] * c_ev)[ok], "x", color=MODEL_COLOR, ms=4, label="model at each event")
+    ax.plot(e["dp"][ok] / PA_PER_BAR, (e["d"] * c_ev)[ok], "x", color=MODEL_COLOR, ms=4, label="model at each event")
     ax.set_xlabel("pressure difference |ΔP| at breakaway [bar]")
     ax.set_ylabel("held torque at breakaway T·sgn(n) [N·m]")
     ax.set_title("breakaway torque against pressure")
@@ -334,15 +335,15 @@ def plot_breakaway(rd: ReportData, ens: Ensemble) -> Plot | None:
     grid = np.linspace(0.0, 1.1 * psum[ok].max(), 50)
     line = grid_samples(rd.spec, float(np.median(e["theta"])), 0.0, grid / 2, grid / 2, p_case, mu, 1.0, temp)
     c_l, lo_l, hi_l = ens.breakaway(line)
-    ax1.plot(grid / BAR, -c_l, color=MODEL_COLOR, lw=1.1, label="model: T_break(P_A + P_B)")
-    _band(ax1, grid / BAR, -lo_l, -hi_l, "#d62728", 0.45, "95 % band of the model")
+    ax1.plot(grid / PA_PER_BAR, -c_l, color=MODEL_COLOR, lw=1.1, label="model: T_break(P_A + P_B)")
+    _band(ax1, grid / PA_PER_BAR, -lo_l, -hi_l, "#d62728", 0.45, "95 % band of the model")
     fl, fh = _predictive(-c_l, -lo_l, -hi_l, rd.sigma("breakaway") or 0.0)
-    _band(ax1, grid / BAR, fl, fh, "#ff7f0e", 0.18, "95 % band of one reading")
+    _band(ax1, grid / PA_PER_BAR, fl, fh, "#ff7f0e", 0.18, "95 % band of one reading")
     for sel, mk in ((pos, "o"), (neg, "s")):
         if sel.any():
-            ax1.plot(psum[sel] / BAR, (e["d"] * (t_p - e["held"]))[sel], mk, ms=4.5, color="#1f77b4",
+            ax1.plot(psum[sel] / PA_PER_BAR, (e["d"] * (t_p - e["held"]))[sel], mk, ms=4.5, color="#1f77b4",
                      mfc="#1f77b4" if mk == "o" else "white")
-    ax1.set_xlim(0, grid[-1] / BAR)
+    ax1.set_xlim(0, grid[-1] / PA_PER_BAR)
     ax1.set_xlabel("port pressure sum P_A + P_B at breakaway [bar]")
     ax1.set_ylabel("static friction torque [N·m]")
     ax1.set_title("static friction at breakaway: T_p(θ, ΔP) − T_held")
@@ -378,7 +379,7 @@ def plot_breakaway(rd: ReportData, ens: Ensemble) -> Plot | None:
         _band(ax2, deg, pl, ph, col, 0.15)
         _band(ax2, deg, ll, hh, col, 0.45)
         ax2.plot(deg, cc, "-" if d > 0 else "--", color=col, lw=1.1,
-                 label=f"ΔP ≈ {dp / BAR:.0f} bar" + ("" if d > 0 else ", negative direction"))
+                 label=f"ΔP ≈ {dp / PA_PER_BAR:.0f} bar" + ("" if d > 0 else ", negative direction"))
         ax2.plot(np.degrees(np.mod(e["theta"][s2], pitch)), (e["d"] * e["held"])[s2] / ideal[s2],
                  "o" if d > 0 else "s", color=col, mfc=col if d > 0 else "white", ms=4.5, ls="none")
     ax2.set_xlim(0, np.degrees(pitch))
@@ -407,10 +408,10 @@ def plot_residuals(rd: ReportData) -> Plot | None:
             r = rd.resid[ch] / rd.sample_sigma[ch]
         if ch == "breakaway":
             e = _event_cols(rd)
-            xs = [None, (e["p_a"] - e["p_b"]) / BAR, np.degrees(np.mod(e["theta"], 2 * np.pi)), e["time"]]
+            xs = [None, (e["p_a"] - e["p_b"]) / PA_PER_BAR, np.degrees(np.mod(e["theta"], 2 * np.pi)), e["time"]]
         else:
             s = rd.dataset.running
-            xs = [np.asarray(s.speed) * RPM, np.asarray(s.p_a - s.p_b) / BAR,
+            xs = [np.asarray(s.speed) * RPM_PER_RAD_S, np.asarray(s.p_a - s.p_b) / PA_PER_BAR,
                   np.degrees(np.mod(np.asarray(s.theta), 2 * np.pi)), np.asarray(s.time)]
         finite = np.flatnonzero(np.isfinite(r))
         flag = rd.flagged.get(ch, np.zeros(r.shape, bool))
@@ -470,8 +471,8 @@ def plot_discrepancy_residuals(path) -> Plot | None:
         if keep.size > MAX_POINTS:
             keep = np.sort(rng.choice(keep, MAX_POINTS, replace=False))
         lim = max(4.0, min(float(np.max(np.abs(before[keep]))) * 1.1, 30.0))
-        first = ((data[f"{ch}__speed"] / BAR, "P_A + P_B at breakaway [bar]") if ch == "breakaway"
-                 else (data[f"{ch}__speed"] * RPM, "speed n [rpm]"))
+        first = ((data[f"{ch}__speed"] / PA_PER_BAR, "P_A + P_B at breakaway [bar]") if ch == "breakaway"
+                 else (data[f"{ch}__speed"] * RPM_PER_RAD_S, "speed n [rpm]"))
         for j, (x, label) in enumerate((first, (np.degrees(data[f"{ch}__theta"]), "shaft angle θ [deg]"))):
             ax = axes[i, j]
             ax.plot(x[keep], np.clip(before[keep], -lim, lim), ".", ms=1.6, color="#bbbbbb",
@@ -603,9 +604,9 @@ def plot_efficiency_maps(rd: ReportData, ens: Ensemble) -> Plot | None:
     s = rd.dataset.running
     w_abs = np.abs(np.asarray(s.speed))
     dp_abs = np.abs(np.asarray(s.p_a - s.p_b))
-    w = np.geomspace(max(np.nanmin(w_abs), 0.1 / RPM), np.nanmax(w_abs), 48)
+    w = np.geomspace(max(np.nanmin(w_abs), 0.1 / RPM_PER_RAD_S), np.nanmax(w_abs), 48)
     dp_max = float(np.nanmax(dp_abs))
-    dps = np.linspace(max(0.1 * dp_max, 5 * BAR), dp_max, 32)
+    dps = np.linspace(max(0.1 * dp_max, 5 * PA_PER_BAR), dp_max, 32)
     theta = revolution(rd.spec, 8)
     samples = grid_samples(rd.spec, theta[None, None, :], w[None, :, None], ref["p_low"] + dps[:, None, None],
                            ref["p_low"], ref["p_case"], ref["viscosity"], 1.0, ref["temperature"])
@@ -618,7 +619,7 @@ def plot_efficiency_maps(rd: ReportData, ens: Ensemble) -> Plot | None:
     eta_v = np.clip(eta_v, 0.0, 1.0)
     eta_t = np.clip(eta_hm, 0.0, 1.0) * eta_v
     fig, axes = _figure(1, 3, figsize=(13, 4.1))
-    x, y = w * RPM, dps / BAR
+    x, y = w * RPM_PER_RAD_S, dps / PA_PER_BAR
     runs = running_runs(rd)
     from matplotlib.ticker import MaxNLocator
 
@@ -637,7 +638,7 @@ def plot_efficiency_maps(rd: ReportData, ens: Ensemble) -> Plot | None:
             cs = ax.contour(x, y, eta, levels=lines, colors="white", linewidths=0.7)
             ax.clabel(cs, fmt=lambda v: f"{v:.3g}", fontsize=7)
         fig.colorbar(cf, ax=ax, pad=0.01, format="%.3g")
-        ax.plot([abs(r.speed) * RPM for r in runs], [r.dp / BAR for r in runs], ".", color="white", ms=3,
+        ax.plot([abs(r.speed) * RPM_PER_RAD_S for r in runs], [r.dp / PA_PER_BAR for r in runs], ".", color="white", ms=3,
                 mec="k", mew=0.3)
         ax.set_xscale("log")
         ax.set_xlim(x[0], x[-1])
@@ -647,7 +648,7 @@ def plot_efficiency_maps(rd: ReportData, ens: Ensemble) -> Plot | None:
         ax.set_xlabel("shaft speed n [rpm]")
     axes[0].set_ylabel("pressure difference ΔP [bar]")
     i_ref = int(np.argmin(np.abs(dps - 0.8 * dp_max)))
-    j_ref = int(np.argmin(np.abs(w * RPM - min(1000.0, 0.5 * w[-1] * RPM))))
+    j_ref = int(np.argmin(np.abs(w * RPM_PER_RAD_S - min(1000.0, 0.5 * w[-1] * RPM_PER_RAD_S))))
     return Plot(embed_png(fig, "efficiency maps"), {
         "ref": ref, "point": (float(x[j_ref]), float(y[i_ref]), float(eta_hm[i_ref, j_ref]),
                               float(eta_v[i_ref, j_ref]), float(eta_t[i_ref, j_ref]))})
@@ -681,13 +682,13 @@ def plot_starting_efficiency(rd: ReportData, ens: Ensemble) -> Plot | None:
     scale = (D * dps / (2 * np.pi))[:, None]
     c, lo, hi = (v.reshape(dps.size, th.size) / scale for v in (c, lo, hi))
     fig, ax = _figure(figsize=(7.5, 4.2))
-    x = dps / BAR
+    x = dps / PA_PER_BAR
     ax.plot(x, c.mean(1), color="#1f77b4", label="model, mean over shaft angle")
     _band(ax, x, lo.mean(1), hi.mean(1), "#1f77b4", 0.3)
     ax.plot(x, c.min(1), color="#d62728", label="model, worst shaft angle")
     _band(ax, x, lo.min(1), hi.min(1), "#d62728", 0.3)
     if e is not None:
-        ax.plot(e["dp"][ok] / BAR, (e["d"] * e["held"])[ok] / (D * e["dp"][ok] / (2 * np.pi)), "o", ms=3.5,
+        ax.plot(e["dp"][ok] / PA_PER_BAR, (e["d"] * e["held"])[ok] / (D * e["dp"][ok] / (2 * np.pi)), "o", ms=3.5,
                 color="k", alpha=0.6, label="breakaway events (data)")
     ax.set_xlabel("pressure difference |ΔP| [bar]")
     ax.set_ylabel("starting torque efficiency")
