@@ -34,7 +34,7 @@ from motorid.physics.friction import StribeckFriction  # noqa: E402
 from motorid.physics.hydrodynamic import HydrodynamicTorque  # noqa: E402
 from motorid.discrepancy.select import diagnose  # noqa: E402
 from motorid.identify.extract import extract  # noqa: E402
-from motorid.spec import load_motor_spec, parse_motor_spec  # noqa: E402
+from motorid.io.spec import load_motor_spec, parse_motor_spec  # noqa: E402
 
 PROTOCOLS = sorted((ROOT / "synthetic_data" / "concealed" / "protocols").glob("*.toml"))
 SPEC_9 = load_motor_spec(ROOT / "synthetic_data" / "demo" / "motor.toml")

@@ -42,7 +42,7 @@ def _setup():
     import motorid  # noqa: F401
     from motorid.bench.protocols import load_protocol
     from motorid.bench.truth import load_truth
-    from motorid.spec import load_motor_spec
+    from motorid.io.spec import load_motor_spec
 
     spec = load_motor_spec(MOTOR)
     truth = load_truth(TRUTH)

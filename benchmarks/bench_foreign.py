@@ -18,7 +18,7 @@ relative tolerance of :data:`REL_TOL` of the truth.
 
 A second table probes the log reader with the header unit suffixes that
 BENCH_LOG_FORMAT.md names (and a few more): each is written into a one-run log
-and read back with ``motorid.logs.read_log`` (in a subprocess), checking that
+and read back with ``motorid.io.logs.read_log`` (in a subprocess), checking that
 the value arrives in SI.
 """
 
@@ -181,7 +181,7 @@ PROBE_EXTRAS = [("time_ms", "time_s", 100.0), ("speed_rad_s", "speed_rad_s", 0.1
 
 _PROBE_SCRIPT = r"""
 import json, sys
-from motorid.logs import read_log
+from motorid.io.logs import read_log
 from motorid.errors import InputError
 out = {}
 for path, si in json.loads(sys.argv[1]):
@@ -353,7 +353,7 @@ def run(quick: bool = False, only=None, keep: str | None = None) -> str:
             lines.append("")
             lines.append("warnings: " + "; ".join(r["warnings"]))
         lines.append("")
-    lines += ["</details>", "", "Header unit suffixes, each in a one-run log read by `motorid.logs.read_log` "
+    lines += ["</details>", "", "Header unit suffixes, each in a one-run log read by `motorid.io.logs.read_log` "
               "(promised: named in BENCH_LOG_FORMAT.md):", "",
               "| header | promised | accepted | value in SI correct | reader says |", "|---|---|---|---|---|"]
     for p in probe:

@@ -42,8 +42,8 @@ def make(rows: int, path: str) -> None:
     from motorid.bench.protocols import load_protocol
     from motorid.bench.simulate import simulate_campaign
     from motorid.bench.truth import load_truth
-    from motorid.logs import write_log
-    from motorid.spec import load_motor_spec
+    from motorid.io.logs import write_log
+    from motorid.io.spec import load_motor_spec
 
     spec = load_motor_spec(MOTOR)
     truth = load_truth(TRUTH)
@@ -62,8 +62,8 @@ def fit(path: str) -> None:
     import motorid  # noqa: F401
     from motorid.identify.extract import extract
     from motorid.identify.least_squares import fit_least_squares
-    from motorid.logs import read_logs
-    from motorid.spec import load_motor_spec
+    from motorid.io.logs import read_logs
+    from motorid.io.spec import load_motor_spec
 
     spec = load_motor_spec(MOTOR)
     t_import = time.perf_counter() - t0

@@ -158,8 +158,8 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
     # ------------------------------------------------------------ fit step, in process
     from motorid.identify.extract import extract
     from motorid.identify.least_squares import fit_least_squares
-    from motorid.logs import read_logs
-    from motorid.spec import load_motor_spec
+    from motorid.io.logs import read_logs
+    from motorid.io.spec import load_motor_spec
 
     import baseline  # benchmarks/ is on sys.path (run.py)
 

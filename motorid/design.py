@@ -443,7 +443,7 @@ def _cmd_plan(args) -> int:
     from motorid.identify.cli import check_logs_exist
     from motorid.identify.least_squares import fit_least_squares
     from motorid.identify.pipeline import load_campaign
-    from motorid.spec import load_motor_spec
+    from motorid.io.spec import load_motor_spec
 
     if args.top < 1:
         raise InputError(f"--top must be at least 1, got {args.top}")

@@ -13,6 +13,8 @@ MODEL.md: ``Kv``, ``KF``, ``KFS``, ``TFc``, ``Ks``, ``KL0``, ``KL_a1``,
 
 from __future__ import annotations
 
+import math
+from dataclasses import asdict, dataclass, field
 from typing import Sequence
 
 import jax
@@ -21,12 +23,90 @@ import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
 from motorid._aot import cached_jit
-from motorid.physics import flow, torque
+from motorid.physics import flow, oil, torque
 from motorid.physics.base import Channels, ParameterInfo, Samples  # noqa: F401  (re-exported)
 from motorid.physics.flow import leakage_harmonics  # noqa: F401  (re-exported)
 from motorid.physics.kinematics import port_a_sum, port_a_sum_approx, ripple_coefficients
-from motorid.spec import MotorSpec  # noqa: F401  (re-exported)
 
+
+# ---------------------------------------------------------------------------
+# known data: the motor and its oil (read from a spec TOML by motorid.io.spec)
+
+
+@dataclass(frozen=True)
+class OilSpec:
+    """The oil: Walther viscosity through two points and density at 15 °C."""
+
+    name: str = "ISO VG 46 mineral oil"
+    nu40_cSt: float = 46.0
+    nu100_cSt: float = 6.8
+    density15_kg_m3: float = 875.0
+    expansion_per_K: float = 6.5e-4
+
+    def viscosity(self, temperature_C):
+        """Dynamic viscosity μ at ``temperature_C`` [°C] → [Pa·s]."""
+        return oil.dynamic_viscosity(
+            temperature_C, self.nu40_cSt, self.nu100_cSt, self.density15_kg_m3, self.expansion_per_K
+        )
+
+
+@dataclass(frozen=True)
+class MotorSpec:
+    """Known motor data, SI.
+
+    pistons : n [-]; displacement : D [m³/rev]; inertia : J [kg·m²];
+    leak_phase : φ of K_LB(θ) = K_LA(θ − φ) [rad], default π/n (MODEL.md);
+    leak_harmonics : M, the order of the K_L(θ) Fourier series [-].
+    """
+
+    name: str
+    pistons: int
+    displacement: float
+    inertia: float = 0.0
+    leak_phase: float | None = None
+    leak_harmonics: int = 1
+    oil: OilSpec | None = field(default_factory=OilSpec)
+
+    @property
+    def phase(self) -> float:
+        return math.pi / self.pistons if self.leak_phase is None else self.leak_phase
+
+    @property
+    def displacement_cm3(self) -> float:
+        return self.displacement * 1e6
+
+    def to_toml(self) -> str:
+        lines = [
+            "[motor]",
+            f'name = "{self.name}"',
+            f"pistons = {self.pistons}",
+            f"displacement_cm3 = {self.displacement * 1e6!r}",
+            f"inertia_kg_m2 = {self.inertia!r}",
+        ]
+        if self.leak_phase is not None:
+            lines.append(f"leak_phase_deg = {math.degrees(self.leak_phase)!r}")
+        if self.leak_harmonics != 1:
+            lines.append(f"leak_harmonics = {self.leak_harmonics}")
+        if self.oil is not None:
+            o = self.oil
+            lines += [
+                "",
+                "[oil]",
+                f'name = "{o.name}"',
+                f"nu40_cSt = {o.nu40_cSt!r}",
+                f"nu100_cSt = {o.nu100_cSt!r}",
+                f"density15_kg_m3 = {o.density15_kg_m3!r}",
+            ]
+            if o.expansion_per_K != OilSpec.expansion_per_K:
+                lines.append(f"expansion_per_K = {o.expansion_per_K!r}")
+        return "\n".join(lines) + "\n"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+# ---------------------------------------------------------------------------
+# unknowns: the parameters
 
 BASE_PARAMETERS: dict[str, ParameterInfo] = {
     "Kv": ParameterInfo("-", "viscous torque coefficient, T_v = −K_v D μ ω (Eq. 24)", True, 1e3),

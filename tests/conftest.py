@@ -22,7 +22,7 @@ def simulated(pistons: int = 9, displacement_cm3: float = 80.0, seed: int = 1,
     from motorid.bench.protocols import load_protocol
     from motorid.bench.simulate import simulate_campaign
     from motorid.bench.truth import parse_truth
-    from motorid.spec import MotorSpec, OilSpec
+    from motorid.model import MotorSpec, OilSpec
 
     spec = MotorSpec(name=f"test-{pistons}", pistons=pistons, displacement=displacement_cm3 * 1e-6,
                      inertia=0.005, oil=OilSpec())

@@ -19,9 +19,9 @@ from motorid.bench.simulate import simulate_campaign
 from motorid.bench.truth import load_truth, parse_truth
 from motorid.physics.base import Mechanism
 from motorid.errors import InputError
-from motorid.logs import PROTOCOLS
+from motorid.io.logs import PROTOCOLS
 from motorid.model import ParameterInfo
-from motorid.spec import load_motor_spec
+from motorid.io.spec import load_motor_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "synthetic_data" / "demo"
@@ -265,7 +265,7 @@ def test_demo_regenerates_in_seconds(demo_log, tmp_path):
     camp = simulate_campaign(protos, spec, truth, seed=json.loads((DEMO / "manifest.json").read_text())["seed"])
     elapsed = time.perf_counter() - start
     assert elapsed < 30.0
-    from motorid.logs import write_log
+    from motorid.io.logs import write_log
 
     fresh = pd.read_csv(write_log(camp.frame, tmp_path / "fresh.csv.gz"))
     assert list(fresh.columns) == list(demo_log.columns) and len(fresh) == len(demo_log)

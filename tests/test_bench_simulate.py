@@ -17,11 +17,11 @@ from motorid.bench.protocols import parse_protocol
 from motorid.bench.simulate import simulate_campaign
 from motorid.bench.truth import Truth, parse_truth
 from motorid.physics.base import Mechanism
-from motorid.logs import FORMAT_COLUMNS, write_log
+from motorid.io.logs import FORMAT_COLUMNS, write_log
 from motorid.model import ParameterInfo
 from motorid.physics import torque as torque_physics
 from motorid.physics.kinematics import port_a_sum
-from motorid.spec import MotorSpec, OilSpec
+from motorid.model import MotorSpec, OilSpec
 
 SPEC = MotorSpec("test-9", pistons=9, displacement=80e-6, inertia=0.005, oil=OilSpec())
 TRUTH = parse_truth({"parameters": {"Kv": 5000.0, "KF": 0.003, "KFS": 0.015, "TFc": 3.0, "Ks": 1.0,

@@ -141,7 +141,7 @@ def test_onsets_on_the_speed_limit_take_the_acceleration_of_the_other_events():
     growth the samples saw give the acceleration against P_A + P_B, and with it the onset
     of every event comes out within half a millisecond, at every sample phase."""
     from motorid.identify.extract import extract
-    from motorid.spec import MotorSpec, OilSpec
+    from motorid.model import MotorSpec, OilSpec
 
     spec = MotorSpec("test-9", pistons=9, displacement=80e-6, inertia=0.005, oil=OilSpec())
     rng = np.random.default_rng(5)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from motorid import design, model
-from motorid.spec import MotorSpec, OilSpec
+from motorid.model import MotorSpec, OilSpec
 from conftest import DEMO_TRUTH, REPO
 
 SPEC = MotorSpec(name="test-9", pistons=9, displacement=80e-6, inertia=0.005, oil=OilSpec())
@@ -96,7 +96,7 @@ def test_plan_cli(tmp_path, capsys):
     import json
 
     from motorid.cli import main
-    from motorid.logs import write_log
+    from motorid.io.logs import write_log
 
     camp, _, _ = _fast_runs_only()
     log = write_log(camp.frame, tmp_path / "fast.csv")

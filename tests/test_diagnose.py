@@ -15,7 +15,7 @@ from conftest import REPO
 from motorid.cli import main
 from motorid.discrepancy.select import diagnose, diagnosis_document
 from motorid.identify.pipeline import load_campaign
-from motorid.spec import load_motor_spec
+from motorid.io.spec import load_motor_spec
 
 ROOT = REPO / "synthetic_data" / "concealed"
 CONCEALED = ["stribeck_friction", "hydrodynamic_torque", "turbulent_leakage", "compressibility_flow",

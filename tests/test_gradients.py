@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from motorid import model
-from motorid.spec import MotorSpec
+from motorid.model import MotorSpec
 
 SPEC = MotorSpec(name="t", pistons=9, displacement=80e-6, inertia=0.004)
 P0 = {"Kv": 4000.0, "KF": 2e-3, "KFS": 1.2e-2, "TFc": 2.0, "Ks": 1.5,

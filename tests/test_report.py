@@ -16,7 +16,7 @@ from conftest import REPO
 from motorid import model
 from motorid.report import format as fmt
 from motorid.report.html import SECTIONS, chain_verdict, verdict, write_report
-from motorid.spec import MotorSpec, OilSpec
+from motorid.model import MotorSpec, OilSpec
 
 TRUTH = {"Kv": 5000.0, "KF": 0.003, "KFS": 0.015, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14,
          "KL_a1": 0.15, "KL_b1": 0.08, "KAB": 2e-14}

@@ -122,7 +122,7 @@ def test_run_means_are_judged_with_the_viscosity_error_they_share(name):
     from conftest import REPO
     from motorid.discrepancy.locate import _run_table
     from motorid.identify.pipeline import load_campaign
-    from motorid.spec import load_motor_spec
+    from motorid.io.spec import load_motor_spec
 
     root = REPO / "synthetic_data" / "concealed" / name
     spec = load_motor_spec(root / "motor.toml")

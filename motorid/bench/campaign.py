@@ -19,7 +19,7 @@ from motorid import __version__
 from motorid._atomic import write_bytes_atomic
 from motorid.bench.simulate import Campaign, protocol_names
 from motorid.errors import InputError
-from motorid.logs import write_log
+from motorid.io.logs import write_log
 
 LOG_NAME = "campaign.csv.gz"
 

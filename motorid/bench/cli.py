@@ -46,7 +46,7 @@ def _cmd_simulate(args) -> int:
     from motorid.bench.sensors import parse_sensors
     from motorid.bench.simulate import simulate_campaign
     from motorid.bench.truth import load_truth
-    from motorid.spec import load_motor_spec
+    from motorid.io.spec import load_motor_spec
 
     if args.seed < 0:
         raise InputError(f"--seed must be a non-negative integer, got {args.seed}")

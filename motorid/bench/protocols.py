@@ -70,8 +70,8 @@ from pathlib import Path
 
 from motorid.bench.sensors import Sensors, parse_sensors
 from motorid.errors import InputError
-from motorid.logs import PROTOCOLS
-from motorid.spec import _number, read_toml  # noqa: F401  (read_toml is re-exported)
+from motorid.io.logs import PROTOCOLS
+from motorid.io.tomlfile import read_toml, toml_number  # noqa: F401  (read_toml is re-exported)
 from motorid.units import M3S_PER_LPM, PA_PER_BAR, RAD_S_PER_RPM
 
 
@@ -238,7 +238,7 @@ def _number_list(table: dict, key: str, where: str, *, required=True, default=No
     values = value if isinstance(value, list) else [value]
     if not values:
         raise InputError(f"{where}: key '{key}' must not be an empty list")
-    return [_number({key: v}, key, where, **limits) for v in values]
+    return [toml_number({key: v}, key, where, **limits) for v in values]
 
 
 def _directions(table: dict, where: str) -> list[int]:
@@ -312,7 +312,7 @@ def _parse_settings(table: dict, where: str, cls, keys: dict, allowed=None, why:
     _check_keys(table, list(keys) if allowed is None else allowed, where, why)
     values = {}
     for key, (attr, factor, low, low_open, high) in keys.items():
-        value = _number(table, key, where, required=False, low=low, low_open=low_open, high=high)
+        value = toml_number(table, key, where, required=False, low=low, low_open=low_open, high=high)
         if value is not None:
             values[attr] = value * factor
     return cls(**values)

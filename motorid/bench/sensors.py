@@ -23,7 +23,7 @@ import numpy as np
 
 from motorid.errors import InputError
 from motorid.units import FORMAT_COLUMNS
-from motorid.spec import _number
+from motorid.io.tomlfile import toml_number
 
 #: log column → canonical SI column, for the channels a sensor reads
 SENSOR_COLUMNS = {col: si for si, (col, _) in FORMAT_COLUMNS.items() if si != "time_s"}
@@ -139,8 +139,8 @@ def parse_sensors(table, where: str, base: Sensors | None = None) -> Sensors:
         si = SENSOR_COLUMNS[key]
         old = channels[si]
         f = _SI_FACTOR[si]
-        num = lambda k, d: _number(value, k, tw, required=False, default=d, low=0.0, low_open=False)  # noqa: E731
-        offset = _number(value, "offset", tw, required=False, default=old.offset / f)
+        num = lambda k, d: toml_number(value, k, tw, required=False, default=d, low=0.0, low_open=False)  # noqa: E731
+        offset = toml_number(value, "offset", tw, required=False, default=old.offset / f)
         channels[si] = ChannelSensor(noise=num("noise", old.noise / f) * f,
                                      relative_noise=num("relative_noise", old.relative_noise),
                                      resolution=num("resolution", old.resolution / f) * f,

@@ -30,7 +30,7 @@ def run_diagnose(args) -> int:
     from motorid.identify.cli import check_logs_exist, check_output
     from motorid.identify.pipeline import load_campaign
     from motorid.identify.results import write_json_atomic
-    from motorid.spec import load_motor_spec
+    from motorid.io.spec import load_motor_spec
     from motorid.errors import InputError
 
     out = Path(args.out)

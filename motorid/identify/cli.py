@@ -41,7 +41,7 @@ def run_fit(args) -> int:
     from motorid.identify.least_squares import FitOptions
     from motorid.identify.pipeline import identify
     from motorid.identify.results import CHAIN_FILE, RESULT_FILE, result_document, write_chain, write_json_atomic
-    from motorid.spec import load_motor_spec
+    from motorid.io.spec import load_motor_spec
 
     out = Path(args.out)
     check_output(out, args.force)

@@ -25,7 +25,7 @@ import pandas as pd
 from motorid.errors import InputError
 from motorid.units import SI_COLUMNS
 from motorid.model import Samples, make_samples
-from motorid.spec import MotorSpec
+from motorid.model import MotorSpec
 
 RUNNING_PROTOCOLS = ("constant_speed", "constant_pressure", "constant_flow", "constant_torque")
 STARTABILITY = "startability"

@@ -22,7 +22,7 @@ class Identification:
 def load_campaign(paths: Sequence, spec):
     """Read and validate the logs, then extract steady samples and breakaway events."""
     from motorid.identify.extract import extract
-    from motorid.logs import read_logs
+    from motorid.io.logs import read_logs
 
     frame = read_logs([str(p) for p in paths], spec)
     return frame, extract(frame, spec)
@@ -32,7 +32,7 @@ def viscosity_model_warning(frame, dataset, ls) -> str:
     """A warning where the viscosity of running samples came from the oil model, not a
     viscometer: K_v scales with μ and K_L0, K_AB with 1/μ, one for one, and the
     standard errors do not hold the oil model's own error ("" where it did not)."""
-    from motorid.logs import VISCOSITY_FROM_OIL
+    from motorid.io.logs import VISCOSITY_FROM_OIL
 
     if frame is None or VISCOSITY_FROM_OIL not in frame.columns or not dataset.n_running:
         return ""

@@ -22,6 +22,7 @@ import numpy as np
 
 from motorid import model
 from motorid.errors import InputError
+from motorid.io.results import read_json
 from motorid.identify.least_squares import _robust_std
 from motorid.units import PA_PER_BAR, RUNNING_CHANNELS
 
@@ -84,15 +85,6 @@ def _same_fit(doc: dict, ls) -> bool:
         if (a is None) != (b is None) or (a is not None and not math.isclose(a, b, rel_tol=1e-9, abs_tol=0.0)):
             return False
     return True
-
-
-def _read_json(path: Path, what: str) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON ({exc})") from None
 
 
 def _mechanisms(ids, notes) -> tuple:
@@ -179,7 +171,7 @@ def gather(out_dir, identification=None, spec=None, logs=None, motor=None) -> Re
         ls = identification.ls
         if spec is None:
             raise InputError("write_report: an identification needs its motor spec")
-        doc = _read_json(result_path, "result.json") if result_path.exists() else None
+        doc = read_json(result_path, "result.json") if result_path.exists() else None
         if doc is None or not _same_fit(doc, ls):
             doc = json.loads(json.dumps(result_document(ls, spec, identification.dataset, identification.bayes,
                                                         {}, identification.seconds, identification.priors)))
@@ -199,7 +191,7 @@ def gather(out_dir, identification=None, spec=None, logs=None, motor=None) -> Re
     else:
         if not result_path.exists():
             raise InputError(f"{out}: no {RESULT_FILE} here; run `motorid fit LOG... --motor SPEC --out {out}` first")
-        doc = _read_json(result_path, "result.json")
+        doc = read_json(result_path, "result.json")
         if "parameters" not in doc:
             raise InputError(f"{result_path}: not a motorid result (no 'parameters')")
         inputs = doc.get("inputs") or {}
@@ -208,7 +200,7 @@ def gather(out_dir, identification=None, spec=None, logs=None, motor=None) -> Re
         if spec is None:
             if not motor:
                 raise InputError(f"{result_path}: names no motor spec; pass --motor SPEC.toml")
-            from motorid.spec import load_motor_spec
+            from motorid.io.spec import load_motor_spec
 
             spec = load_motor_spec(motor)
         mechanisms = _mechanisms(doc.get("fit", {}).get("mechanisms") or [], notes)
@@ -249,7 +241,7 @@ def gather(out_dir, identification=None, spec=None, logs=None, motor=None) -> Re
     diag_path = out / "diagnosis.json"
     if diag_path.exists():
         try:
-            diagnosis = _read_json(diag_path, "diagnosis.json")
+            diagnosis = read_json(diag_path, "diagnosis.json")
         except InputError as exc:
             notes.append(str(exc))
     rd = ReportData(out, doc, spec, dataset, params, mechanisms, list(names), draws, source, chain,

@@ -7,7 +7,7 @@ import pytest
 
 from motorid import model
 from motorid.physics import flow, kinematics, oil, torque
-from motorid.spec import MotorSpec
+from motorid.model import MotorSpec
 
 PISTONS = [3, 4, 6, 7, 9, 12]
 

@@ -12,7 +12,7 @@ from motorid import model
 from motorid.physics import registry
 from motorid.physics.base import Mechanism
 from motorid.errors import InputError
-from motorid.spec import MotorSpec
+from motorid.model import MotorSpec
 
 SPEC = MotorSpec(name="t", pistons=9, displacement=80e-6, inertia=0.004)
 BASE = {"Kv": 4000.0, "KF": 2e-3, "KFS": 1.2e-2, "TFc": 2.0, "Ks": 1.5,

@@ -6,9 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from motorid import logs
+from motorid.io import logs
 from motorid.errors import InputError
-from motorid.spec import MotorSpec, OilSpec
+from motorid.model import MotorSpec, OilSpec
 
 SPEC = MotorSpec("test-9", pistons=9, displacement=80e-6, inertia=0.005, oil=OilSpec())
 NO_OIL = MotorSpec("test-9", pistons=9, displacement=80e-6, oil=None)

@@ -1,0 +1,12 @@
+"""Everything read and written at the edge, in the units of the outside world.
+
+SI inside motorid; units are converted here, once, and every bad value raises
+:class:`motorid.errors.InputError` naming the file, column, run or key.
+
+- :mod:`logs`     bench logs (BENCH_LOG_FORMAT.md CSV, and the header dialects of other benches)
+- :mod:`spec`     motor spec TOML → :class:`motorid.model.MotorSpec`
+- :mod:`tomlfile` reading TOML files and validating their numbers (specs, protocols, truths)
+- :mod:`results`  result.json / diagnosis.json: read, and written whole or not at all
+
+Nothing heavy is imported here: ``import motorid.io`` costs nothing; import the module you need.
+"""
