@@ -19,7 +19,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 demo: $(STAMP)
-	$(PY) -m motorid.demo
+	$(PY) -m motorid demo
 
 bench: $(STAMP)
 	$(PY) -m compileall -q motorid  # byte-code on disk, as a normal install has it, even under PYTHONDONTWRITEBYTECODE

@@ -6,7 +6,7 @@ ranks low?
 
 The campaign of bench_estimators (lighter ISO 4392 protocols of
 synthetic_data/concealed/protocols/, demo motor and truth) is simulated once and
-fitted; `motorid.design.suggest_runs` ranks every default candidate run by the
+fitted; `motorid.experiment_design.suggest_runs` ranks every default candidate run by the
 Fisher information it would add.  Then the campaign is simulated again over
 N_REP seeds three ways: as it is, with the plan's best run added, and with the
 run ranked in the middle of the plan added (the same seeds: the simulator's
@@ -63,7 +63,7 @@ def run(quick: bool = False) -> str:
     import bench_estimators as be
 
     from motorid.bench.simulate import simulate_campaign
-    from motorid.design import default_candidates, suggest_runs
+    from motorid.experiment_design import default_candidates, suggest_runs
     from motorid.identify.extract import extract
     from motorid.identify.least_squares import fit_least_squares
 
@@ -116,7 +116,7 @@ def run(quick: bool = False) -> str:
         "",
         "The campaign of the efficiency study (lighter ISO 4392-1/-2 protocols of "
         "`synthetic_data/concealed/protocols/`, demo motor and truth) simulated once (seed "
-        f"{SEED0 - 1}) and fitted; `motorid.design.suggest_runs` (what `motorid plan` prints) ranks "
+        f"{SEED0 - 1}) and fitted; `motorid.experiment_design.suggest_runs` (what `motorid plan` prints) ranks "
         f"the {len(candidates)} default candidate runs (constant speed 0.3-2500 rpm × ΔP 50/150/250 bar × "
         "both directions; startability ramps at 40-400 N·m over nine shaft angles of one pitch, both "
         "directions) by how much the Fisher information each adds shrinks the worst-determined "

@@ -5,7 +5,7 @@
 1. Cramér–Rao bound of every parameter of a standard campaign (the lighter
    ISO 4392-1/-2 protocols of synthetic_data/concealed/protocols, demo truth),
    from the Fisher information of the noise model at the truth
-   (:func:`motorid.design.fisher_information`); then N replications (new
+   (:func:`motorid.experiment_design.fisher_information`); then N replications (new
    noise each) fitted by least squares: bias, empirical std, bound, ratio, and
    the coverage of the 68 % / 95 % least-squares intervals.
 2. Simulation-based calibration (Talts et al. 2018) of the emcee posterior:
@@ -140,7 +140,7 @@ def viscosity_nuisance_bound(spec, truth_params, names, prots, camp, data, sigma
     import jax
     import jax.numpy as jnp
 
-    from motorid import design, model
+    from motorid import experiment_design as design, model
     from motorid.identify.extract import VISCOSITY_MODES
 
     smoothed = _smoothed_runs(data)
@@ -283,7 +283,7 @@ def _fmt(x, digits=4):
 def efficiency(quick: bool, budget_s: float):
     from scipy import stats
 
-    from motorid import design
+    from motorid import experiment_design as design
 
     spec, truth, prots = _setup()
     n_rep = 10 if quick else N_REP
@@ -541,7 +541,7 @@ def render(eff: dict, cal: dict, quick: bool, seconds: float) -> str:
         f"and {eff['n_events']} breakaway events per campaign.  Each replication is `simulate_campaign(seed=1000+i)` "
         f"→ `extract` → `fit_least_squares`, {eff['t_rep']:.1f} s each.",
         "",
-        "**Cramér–Rao bound.** `motorid.design.fisher_information` at the true parameters and the true operating "
+        "**Cramér–Rao bound.** `motorid.experiment_design.fisher_information` at the true parameters and the true operating "
         "points (rows of the simulator's `true_frame`), I = Σ J Jᵀ/σ² with J from JAX (forward mode through "
         "`model.predict` / `model.predict_breakaway`).  The σ of each running sample is the sensors' noise "
         "model at the true reading, σ² = noise² + (relative_noise·|x|)² + resolution²/12, plus the noise of the "

@@ -2,7 +2,7 @@ import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-import motorid  # noqa: E402,F401  (float64 before any jax array exists)
+import motorid._jaxconfig  # noqa: E402,F401  (float64 before any jax array exists)
 
 from functools import lru_cache  # noqa: E402
 from pathlib import Path  # noqa: E402

@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from motorid import __version__
+from motorid._version import __version__
 from motorid._atomic import write_bytes_atomic
 from motorid.bench.simulate import Campaign, protocol_names
 from motorid.errors import InputError

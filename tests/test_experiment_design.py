@@ -1,4 +1,4 @@
-"""Fisher information, Cramér–Rao bound and experiment design (motorid.design)."""
+"""Fisher information, Cramér–Rao bound and experiment design (motorid.experiment_design)."""
 
 import math
 from functools import lru_cache
@@ -6,7 +6,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from motorid import design, model
+from motorid import experiment_design as design, model
 from motorid.model import MotorSpec, OilSpec
 from conftest import DEMO_TRUTH, REPO
 

@@ -1,6 +1,6 @@
-"""`make demo`: fit the shipped synthetic campaign and write its report.
+"""`motorid demo` (what `make demo` runs): fit the shipped synthetic campaign and write its report.
 
-    python -m motorid.demo [--out reports/demo] [--no-bayes]
+    motorid demo [--out reports/demo] [--no-bayes]
 
 Runs ``motorid fit synthetic_data/demo/*.csv.gz --motor synthetic_data/demo/motor.toml
 --out reports/demo --bayes --force --report`` from the repository root, so that
@@ -10,13 +10,13 @@ reports/demo`` then works from there), and prints where the files are.
 
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from motorid.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[2]
 CAMPAIGN = Path("synthetic_data") / "demo"
 OUT = Path("reports") / "demo"
 
@@ -26,31 +26,31 @@ def campaign_logs(folder: Path) -> list[Path]:
     return sorted(list(folder.glob("*.csv.gz")) + list(folder.glob("*.csv")))
 
 
-def main(argv=None) -> int:
-    from motorid.cli import main as cli_main
+def register(sub):
+    p = sub.add_parser("demo", help="fit the shipped demo campaign and write its report (make demo)",
+                       description=__doc__.splitlines()[0])
+    p.add_argument("--out", default=str(OUT), help=f"output folder, relative to the repository root ({OUT})")
+    p.add_argument("--no-bayes", action="store_true", help="least squares only (skip the emcee posterior)")
+    p.set_defaults(func=run)
 
-    ap = argparse.ArgumentParser(prog="python -m motorid.demo", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=str(OUT), help=f"output folder, relative to the repository root ({OUT})")
-    ap.add_argument("--no-bayes", action="store_true", help="least squares only (skip the emcee posterior)")
-    args = ap.parse_args(argv)
+
+def run(args) -> int:
+    from motorid.cli.commands import main
 
     if not (ROOT / CAMPAIGN / "motor.toml").exists():
-        print(f"motorid demo: error: {ROOT / CAMPAIGN} holds no demo campaign (motor.toml); "
-              "run it from a clone of the repository", file=sys.stderr)
-        return 2
+        raise InputError(f"{ROOT / CAMPAIGN} holds no demo campaign (motor.toml); run it from a clone of the repository")
     here = Path.cwd()
     os.chdir(ROOT)  # the fit records its inputs relative to the repository root
     try:
         logs = campaign_logs(CAMPAIGN)
         if not logs:
-            print(f"motorid demo: error: no bench log (*.csv.gz, *.csv) in {ROOT / CAMPAIGN}; regenerate it "
-                  f"with the command in {CAMPAIGN / 'README.md'}", file=sys.stderr)
-            return 2
+            raise InputError(f"no bench log (*.csv.gz, *.csv) in {ROOT / CAMPAIGN}; regenerate it "
+                             f"with the command in {CAMPAIGN / 'README.md'}")
         cmd = ["fit", *map(str, logs), "--motor", str(CAMPAIGN / "motor.toml"), "--out", args.out, "--force",
                "--report"] + ([] if args.no_bayes else ["--bayes"])
         print("motorid " + " ".join(cmd), flush=True)
         t0 = time.perf_counter()
-        rc = cli_main(cmd)
+        rc = main(cmd)
         seconds = time.perf_counter() - t0
     finally:
         os.chdir(here)
@@ -65,7 +65,3 @@ def main(argv=None) -> int:
         print(f"  chain   {out / 'chain.npz'}")
     print(f"open the report in a browser, e.g.  xdg-open {out / 'report.html'}  (or open it on macOS)")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -8,7 +8,6 @@ import sys
 import time
 from pathlib import Path
 
-from motorid.cli import subcommand
 from motorid.errors import InputError
 
 
@@ -40,7 +39,7 @@ def _command_line(args) -> str:
     return " ".join(shlex.quote(w) for w in words)
 
 
-def _cmd_simulate(args) -> int:
+def run(args) -> int:
     from motorid.bench.campaign import write_campaign
     from motorid.bench.protocols import load_protocol, read_toml
     from motorid.bench.sensors import parse_sensors
@@ -76,7 +75,6 @@ def _cmd_simulate(args) -> int:
     return 0
 
 
-@subcommand
 def register(sub):
     p = sub.add_parser("simulate", help="run ISO 4392 protocols on the model: a synthetic bench campaign",
                        description="Simulate ISO 4392 bench runs of a motor with known true parameters and "
@@ -96,4 +94,4 @@ def register(sub):
                    help="leave the optional viscosity_mPas column out (readers derive it from temperature)")
     p.add_argument("--full-precision", action="store_true", help="write 17 significant digits")
     p.add_argument("--force", action="store_true", help="replace an existing campaign in --out")
-    p.set_defaults(func=_cmd_simulate)
+    p.set_defaults(func=run)

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from motorid.cli import subcommand
+from motorid.cli._common import check_logs_exist
 from motorid.errors import InputError
 
 
-@subcommand
 def register(sub):
     p = sub.add_parser("report", help="write a self-contained report.html beside a result.json",
                        description="Write DIR/report.html from DIR/result.json (and DIR/chain.npz, "
@@ -17,11 +16,10 @@ def register(sub):
     p.add_argument("dir", help="result folder of `motorid fit`")
     p.add_argument("--logs", nargs="+", metavar="LOG", help="bench logs, where they moved since the fit")
     p.add_argument("--motor", metavar="SPEC.toml", help="motor spec, where it moved since the fit")
-    p.set_defaults(func=run_report)
+    p.set_defaults(func=run)
 
 
-def run_report(args) -> int:
-    from motorid.identify.cli import check_logs_exist
+def run(args) -> int:
     from motorid.report.html import write_report
 
     out = Path(args.dir)

@@ -1,4 +1,4 @@
-"""Fisher information, Cramér–Rao bounds and experiment design.
+"""Experiment design: Fisher information, Cramér–Rao bounds, and the extra bench runs to plan.
 
 The noise model of a campaign is Gaussian and independent per sample and
 channel: the running channels (torque, port flows, case flow) with a standard
@@ -21,7 +21,6 @@ puts that in front of a user.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -30,7 +29,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from motorid import model
-from motorid.cli import subcommand
 from motorid.errors import InputError
 from motorid.identify.least_squares import (RUNNING_CHANNELS, _Ctx, _normal_equations, bucket, pad,
                                             pad_samples)
@@ -403,7 +401,7 @@ def suggest_runs(ls, dataset, spec, candidates: Sequence[Candidate] | None = Non
 
 
 # ----------------------------------------------------------------------------
-# `motorid plan`
+# the plan in words (what `motorid plan` prints)
 
 
 def format_plan(plan: dict, ls) -> str:
@@ -428,38 +426,5 @@ def format_plan(plan: dict, ls) -> str:
     return "\n".join(lines)
 
 
-@subcommand
-def _register(sub):
-    p = sub.add_parser("plan", help="suggest the extra bench runs that would shrink the worst uncertainty most")
-    p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files")
-    p.add_argument("--motor", required=True, help="motor spec TOML")
-    p.add_argument("--top", type=int, default=5, help="how many runs to suggest (default 5)")
-    p.add_argument("--parameter", default=None, help="the parameter to improve (default: the worst-determined)")
-    p.add_argument("--json", action="store_true", help="print the plan as JSON")
-    p.set_defaults(func=_cmd_plan)
-
-
-def _cmd_plan(args) -> int:
-    from motorid.identify.cli import check_logs_exist
-    from motorid.identify.least_squares import fit_least_squares
-    from motorid.identify.pipeline import load_campaign
-    from motorid.io.spec import load_motor_spec
-
-    if args.top < 1:
-        raise InputError(f"--top must be at least 1, got {args.top}")
-    spec = load_motor_spec(args.motor)
-    check_logs_exist(args.logs)
-    _, dataset = load_campaign(args.logs, spec)
-    ls = fit_least_squares(dataset, spec)
-    plan = suggest_runs(ls, dataset, spec, top=args.top, parameter=args.parameter)
-    if args.json:
-        doc = {"worst": plan["worst"], "std_now": plan["std_now"],
-               "suggestions": [s.as_dict() for s in plan["suggestions"]], "unidentified": plan["unidentified"]}
-        print(json.dumps(doc, indent=1, default=float))
-    else:
-        print(format_plan(plan, ls))
-    return 0
-
-
 __all__ = ["fisher_information", "cramer_rao", "suggest_runs", "Candidate", "Suggestion", "default_candidates",
-           "constant_speed_candidate", "startability_candidate", "campaign_information", "wanted_runs"]
+           "constant_speed_candidate", "startability_candidate", "campaign_information", "wanted_runs", "format_plan"]

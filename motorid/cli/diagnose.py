@@ -1,0 +1,39 @@
+"""`motorid diagnose LOG... --motor SPEC.toml --out DIR`: a thin layer over :func:`motorid.api.diagnose`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from motorid.cli._common import check_logs_exist, check_output
+from motorid.errors import InputError
+
+
+def register(sub):
+    p = sub.add_parser("diagnose", help="locate model-data mismatch, name the missing physics, refit")
+    p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files")
+    p.add_argument("--motor", required=True, help="motor spec TOML")
+    p.add_argument("--out", required=True, help="output folder for diagnosis.json")
+    p.add_argument("--force", action="store_true", help="overwrite an existing diagnosis")
+    p.add_argument("--alpha", type=float, default=1e-3, help="family-wise false-alarm rate of the structure tests")
+    p.add_argument("--min-evidence", type=float, default=10.0, help="ΔBIC a mechanism must earn")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from motorid import api
+    from motorid.io.results import DIAGNOSIS_FILE
+
+    out = Path(args.out)
+    check_output(out, args.force, files=(DIAGNOSIS_FILE,))
+    spec = api.load_motor_spec(args.motor)
+    check_logs_exist(args.logs)
+    if not 0 < args.alpha < 1:
+        raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
+    show = sys.stderr.isatty()
+    result = api.diagnose(args.logs, spec, alpha=args.alpha, min_evidence=args.min_evidence, motor_path=args.motor,
+                          progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
+    result.save(out)
+    print(result)
+    print(f"wrote {out / DIAGNOSIS_FILE}")
+    return 0
