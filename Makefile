@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 export MPLBACKEND := Agg
 
-.PHONY: install test demo bench clean
+.PHONY: install test demo bench docs clean
 
 install: $(STAMP)
 
@@ -20,6 +20,16 @@ test: $(STAMP)
 
 demo: $(STAMP)
 	$(PY) -m motorid demo
+
+# the docs/ pages as a site in build/site (git-ignored); mkdocs comes from the optional extra `docs`
+DOCS_STAMP := $(VENV)/.docs-stamp
+$(DOCS_STAMP): pyproject.toml $(STAMP)
+	$(PY) -m pip install -q -e '.[test,docs]'
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	$(VENV)/bin/mkdocs build --strict --quiet
+	@echo "docs built: build/site/index.html"
 
 bench: $(STAMP)
 	$(PY) -m compileall -q motorid  # byte-code on disk, as a normal install has it, even under PYTHONDONTWRITEBYTECODE
