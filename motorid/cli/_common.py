@@ -7,6 +7,12 @@ from pathlib import Path
 from motorid.errors import InputError
 
 
+def add_campaign_arguments(p, logs_help: str = "bench log CSV or CSV.gz files") -> None:
+    """The arguments of a command that reads a campaign: the logs and ``--motor``."""
+    p.add_argument("logs", nargs="+", help=logs_help)
+    p.add_argument("--motor", required=True, help="motor spec TOML")
+
+
 def check_output(out: Path, force: bool, files=("result.json",)):
     """Refuse to overwrite ``files`` in ``out`` without ``--force``, or an ``--out`` that is not a folder."""
     for name in files:

@@ -22,8 +22,8 @@ COMMANDS = (
     ripple_table,
     simulate,
     fit,
-    diagnose,
     report,
+    diagnose,
     plan,
     demo,
 )

@@ -5,14 +5,13 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from motorid.cli._common import check_logs_exist, check_output
+from motorid.cli._common import add_campaign_arguments, check_logs_exist, check_output
 from motorid.errors import InputError
 
 
 def register(sub):
     p = sub.add_parser("diagnose", help="locate model-data mismatch, name the missing physics, refit")
-    p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files")
-    p.add_argument("--motor", required=True, help="motor spec TOML")
+    add_campaign_arguments(p)
     p.add_argument("--out", required=True, help="output folder for diagnosis.json")
     p.add_argument("--force", action="store_true", help="overwrite an existing diagnosis")
     p.add_argument("--alpha", type=float, default=1e-3, help="family-wise false-alarm rate of the structure tests")

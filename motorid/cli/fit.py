@@ -5,14 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from motorid.cli._common import check_logs_exist, check_output
+from motorid.cli._common import add_campaign_arguments, check_logs_exist, check_output
 from motorid.errors import InputError
 
 
 def register(sub):
     p = sub.add_parser("fit", help="identify the motor parameters from bench logs")
-    p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files (BENCH_LOG_FORMAT.md)")
-    p.add_argument("--motor", required=True, help="motor spec TOML")
+    add_campaign_arguments(p, "bench log CSV or CSV.gz files (BENCH_LOG_FORMAT.md)")
     p.add_argument("--out", required=True, help="output folder for result.json")
     p.add_argument("--bayes", action="store_true", help="also sample the posterior with emcee")
     p.add_argument("--force", action="store_true", help="overwrite an existing result")

@@ -5,14 +5,13 @@ from __future__ import annotations
 
 import json
 
-from motorid.cli._common import check_logs_exist
+from motorid.cli._common import add_campaign_arguments, check_logs_exist
 from motorid.errors import InputError
 
 
 def register(sub):
     p = sub.add_parser("plan", help="suggest the extra bench runs that would shrink the worst uncertainty most")
-    p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files")
-    p.add_argument("--motor", required=True, help="motor spec TOML")
+    add_campaign_arguments(p)
     p.add_argument("--top", type=int, default=5, help="how many runs to suggest (default 5)")
     p.add_argument("--parameter", default=None, help="the parameter to improve (default: the worst-determined)")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
