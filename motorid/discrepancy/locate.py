@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from motorid.units import LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S
+from motorid.units import LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S, RUNNING_CHANNELS
 
 CHANNEL_WORDS = {"torque": "running torque", "q_a": "port A flow", "q_b": "port B flow",
                  "q_case": "case-drain flow", "breakaway": "breakaway (held) torque"}
@@ -211,7 +211,7 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
             med[r] = np.median(arr[run_of == r])
         per_run[name] = _quantile_groups(med, 4, fmt=fmt)
 
-    for c in ("torque", "q_a", "q_b", "q_case"):
+    for c in RUNNING_CHANNELS:
         if c not in ls.residuals:
             continue
         res, sig, ok = ls.residuals[c], ls.sigma[c], ls.inliers[c]

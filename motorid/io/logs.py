@@ -319,7 +319,7 @@ def read_log(path, spec=None) -> pd.DataFrame:
     """Read and validate one bench log (``.csv`` or ``.csv.gz``) into the canonical SI frame.
 
     path : the log file (gzip is recognised by its magic bytes too);
-    spec : :class:`motorid.spec.MotorSpec` whose ``oil`` gives the viscosity
+    spec : :class:`motorid.model.MotorSpec` whose ``oil`` gives the viscosity
         [Pa·s] from ``oil_temp_C`` [°C] where the log has no viscosity column or
         empty viscosity cells (and converts a kinematic viscosity column).
 

@@ -25,7 +25,7 @@ from motorid.report.evaluate import (  # noqa: E402
     Ensemble, ReportData, cluster, concat_samples, grid_samples, pressure_levels, reference_conditions, revolution,
     running_runs,
 )
-from motorid.units import LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S  # noqa: E402
+from motorid.units import CHANNELS, LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S  # noqa: E402
 
 DPI = 88
 MAX_POINTS = 4000  # residual points drawn per channel (outliers always drawn)
@@ -396,7 +396,7 @@ def plot_breakaway(rd: ReportData, ens: Ensemble) -> Plot | None:
 
 def plot_residuals(rd: ReportData) -> Plot | None:
     """Normalized residuals (measured − model)/σ of every channel against speed, ΔP, shaft angle and time."""
-    chans = [c for c in ("torque", "q_a", "q_b", "q_case", "breakaway") if c in rd.resid
+    chans = [c for c in CHANNELS if c in rd.resid
              and np.isfinite(rd.resid[c]).any()]
     if not chans:
         return None
@@ -459,7 +459,7 @@ def plot_discrepancy_residuals(path) -> Plot | None:
         data = np.load(path)
     except (OSError, ValueError):
         return None
-    chans = [c for c in ("torque", "q_a", "q_b", "q_case", "breakaway") if f"{c}__before" in data.files
+    chans = [c for c in CHANNELS if f"{c}__before" in data.files
              and data[f"{c}__before"].size]
     if not chans:
         return None
