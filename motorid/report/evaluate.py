@@ -22,7 +22,7 @@ import numpy as np
 
 from motorid import model
 from motorid.errors import InputError
-from motorid.identify.least_squares import _robust_std
+from motorid.robust import robust_std as _robust_std
 
 RPM = 60.0 / (2.0 * math.pi)  # rad/s → rpm
 BAR = 1e5  # Pa per bar
