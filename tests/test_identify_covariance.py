@@ -145,3 +145,18 @@ def test_t_quantile_without_scipy_stats_matches_scipy(dof, level):
     from motorid.identify.covariance import interval_factor
 
     assert interval_factor(dof, level) == pytest.approx(stats.t.ppf(0.5 + level / 2, dof), rel=1.2e-4)
+
+
+def test_covariance_from_the_normal_matrix_inverts_it_over_columns_of_any_scale():
+    rng = np.random.default_rng(9)
+    J = rng.standard_normal((30, 3)) * np.array([1e-12, 1.0, 1e6])  # columns 18 decades apart
+    JtJ = J.T @ J
+    cov = covariance_from_normal(JtJ)
+    s = np.sqrt(np.diag(JtJ))  # (in units of each column's own size)
+    np.testing.assert_allclose((cov * np.outer(s, s)) @ (JtJ / np.outer(s, s)), np.eye(3), atol=1e-9)
+    np.testing.assert_allclose(np.diag(cov), np.diag(np.linalg.inv(JtJ)), rtol=1e-6)
+    # a direction the data do not see has no variance (a pseudo-inverse, not an error)
+    Js = np.column_stack([J[:, 1], J[:, 1]])
+    cs = covariance_from_normal(Js.T @ Js)
+    assert np.all(np.isfinite(cs))
+    np.testing.assert_allclose(cs @ np.array([1.0, -1.0]), 0.0, atol=1e-12)

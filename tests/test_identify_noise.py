@@ -47,3 +47,22 @@ def test_breakaway_noise_grows_with_the_port_pressures_where_the_events_show_it(
     assert gamma < 0.15 and s0 == pytest.approx(0.03, rel=0.1)
     # too few events to tell: one level
     assert breakaway_noise(np.array([0.01, -0.02, 0.03]), x2[:3], k=2)[1] == 0.0
+
+
+def test_initial_noise_from_first_differences_within_each_run():
+    run_of = np.array([0, 0, 0, 0, 1, 1, 2])
+    v = np.array([1.0, 3.0, 1.0, 3.0, 10.0, 10.0, 5.0])
+    # run 0: differences ±2 → RMS 2, over √2; run 1: one difference only; run 2: none
+    got = initial_noise(v, run_of, 3)
+    assert got[0] == pytest.approx(2.0 / np.sqrt(2.0))
+    assert np.isnan(got[1]) and np.isnan(got[2])
+    # a jump between runs is no difference of either
+    assert initial_noise(np.array([0.0, 1.0, 0.0, 100.0, 101.0, 100.0]), np.repeat([0, 1], 3), 2)[1] == \
+        pytest.approx(1.0 / np.sqrt(2.0))
+
+
+def test_floor_noise_fills_missing_runs_with_the_pooled_level_and_floors_short_ones():
+    sig = np.array([1.0, np.nan, 3.0, 0.01, 0.0])
+    got = floor_noise(sig, np.array([5.0, -7.0]))
+    pooled = np.median([1.0, 3.0, 0.01])  # the runs with an estimate above zero
+    np.testing.assert_allclose(got, [1.0, pooled, 3.0, 0.1 * pooled, pooled])
