@@ -141,7 +141,7 @@ def viscosity_nuisance_bound(spec, truth_params, names, prots, camp, data, sigma
     import jax.numpy as jnp
 
     from motorid import experiment_design as design, model
-    from motorid.identify.extract import VISCOSITY_MODES
+    from motorid.identify.types import VISCOSITY_MODES
 
     smoothed = _smoothed_runs(data)
     if not smoothed.any() or data.viscosity_error is None:
@@ -195,11 +195,11 @@ def viscosity_nuisance_bound(spec, truth_params, names, prots, camp, data, sigma
 
 def unresolved_acceleration(camp, data):
     """Mean square, per run, of the true acceleration that the extraction's own
-    estimate (``extract.running_acceleration``: the shaft-locked speed ripple
+    estimate (``acceleration.running_acceleration``: the shaft-locked speed ripple
     resolved in θ, the rest by a 9-point derivative) misses even on noise-free
     speed [rad²/s⁴], per running sample.  Its phase is random from run to run,
     so for the fit it is an input error like noise."""
-    from motorid.identify.extract import running_acceleration
+    from motorid.identify.acceleration import running_acceleration
 
     tf = camp.true_frame
     out = np.zeros(data.n_running)
@@ -725,7 +725,7 @@ def render(eff: dict, cal: dict, quick: bool, seconds: float) -> str:
         "- K_v: the fast runs' speed carries the dynamometer's once-per-revolution ripple, aliased at 2500 rpm "
         "and 50 Hz; a plain derivative of the sampled speed turns it into a false J·α of 0.25 N·m rms in their "
         "torque (2-3 times the torque sensor's noise).  The extraction resolves a shaft-locked speed ripple in θ "
-        "(`extract.running_acceleration`: shaft orders 1 and 2, fitted per steady run and differentiated "
+        "(`acceleration.running_acceleration`: shaft orders 1 and 2, fitted per steady run and differentiated "
         "through θ, the rest by the 9-point derivative); the bound's column 6 adds what that estimate still "
         "misses on noise-free speed, column 7 leaves it out.  The orders are taken lowest first, each where "
         "Akaike's test passes (F ≥ 2) and the sampling does not fold it onto an order kept, or near 0 Hz: the "
@@ -738,7 +738,7 @@ def render(eff: dict, cal: dict, quick: bool, seconds: float) -> str:
         "(0.3 % per reading here) multiplies them sample by sample.  Used as read, it biases K_L0 low "
         "(errors in variables, E[K̂_L0]/K_L0 ≈ 1 − 2σ_rel²) and scatters the K_L(θ) harmonics beyond their "
         "bound.  The extraction now replaces each steady run's readings by a Chebyshev curve in time "
-        "(`extract.smooth_viscosity`; degree by a residual-variance test, kept only where the rest is white), "
+        "(`viscosity.smooth_viscosity`; degree by a residual-variance test, kept only where the rest is white), "
         "and the fit carries the curve's run-level error, common to the run's samples, into the covariance "
         "(`FitResult.covariance_viscosity`, the two-step plug-in term) and the posterior (each draw convolved "
         "with it)."
@@ -774,24 +774,24 @@ def render(eff: dict, cal: dict, quick: bool, seconds: float) -> str:
         f"K_FS {100 * kfs[0]:.0f} % vs {100 * kfs[1]:.0f} %, K_s {100 * ks[0]:.0f} % vs {100 * ks[1]:.0f} % "
         "(nominal 10 %).  K_FS and K_s rest on the breakaway events alone; how the onsets are placed is what "
         "their calibration rests on.  At 25 Hz the shaft meets the dynamometer's 10 rpm limit within a sample "
-        "or two, so `extract.find_breakaway` places an onset with fewer than two growth samples from the angle "
+        "or two, so `breakaway.find_breakaway` places an onset with fewer than two growth samples from the angle "
         "the shaft turned (the speed's integral).  Where the first moving sample is already on the limit, the "
         "angle leaves the unseen time to reach it, u_s: the middle of what it allows was late by 2.6 ± 2.5 ms "
         "over those events (a third of them), K_FS +0.15 bound-widths and its posterior ranks skewed "
         "(p < 0.001) in an earlier run of this study.  Just after breakaway the shaft accelerates at "
         "(static − kinetic friction)/inertia, a line in P_A + P_B; the campaign's other events give it "
-        "(Theil-Sen, then least squares), and with it u_s = W/a and the onset (`extract.place_limited_onset`): "
+        "(Theil-Sen, then least squares), and with it u_s = W/a and the onset (`onset_angle.place_limited_onset`): "
         "−0.02 ± 0.06 ms.  (The simulator's angle after breakaway had to become trapezoidal too: semi-implicit "
         "Euler put the shaft half a step ahead, which read as a 0.25 ms early onset.)  The pressure at an onset "
         "comes from a line through as many readings as best predict the next one (the supply ripple is followed "
         "where it matters), and where the events scatter more than their variance model follows, a sandwich "
-        "widens K_FS and K_s (`least_squares.breakaway_sandwich`; here by a few %).  Now: σ_brk "
+        "widens K_FS and K_s (`covariance.breakaway_sandwich`; here by a few %).  Now: σ_brk "
         f"{eff['sigma_brk']:.3f} N·m, frozen part {eff['frozen']:.3f} N·m rms (of which ≈ "
         f"{eff['sigma_brk'] / math.sqrt(max(n, 1)):.3f} is the {n}-replication mean's own noise), mirrored-pair "
         f"correlation {eff['rho_fixed']:+.2f} at the fixed truth and {cal['rho_sbc']:+.2f} over the SBC truths; "
         "the events' σ grows with the port pressures read at the onset (in the bound, "
         f"{eff['brk_sigma_range'][0]:.3f} to {eff['brk_sigma_range'][1]:.3f} N·m over the loads), which the fit "
-        "models as σ_i² = σ₀²(1 + γ (P_A² + P_B²)/median) (`least_squares.breakaway_noise`); K_FS's bias "
+        "models as σ_i² = σ₀²(1 + γ (P_A² + P_B²)/median) (`noise.breakaway_noise`); K_FS's bias "
         f"{bias_of.get('KFS', float('nan')):+.2f} bound-widths, coverage "
         f"{100 * eff['cov68'][eff['names'].index('KFS')]:.1f} % at 68 %."
         + (("  Ranks not uniform at p < 0.05: " + "; ".join(shapes) + ".") if shapes else

@@ -87,8 +87,8 @@ _PROGRAMS = (
     ("motorid.identify.compress", "_channel_terms", "expansion: f0, J, H per channel (once a fit)"),
     ("motorid.identify.compress", "_jacobian", "which parameters each channel depends on (256 cells)"),
     ("motorid.identify.compress", "_value", "exactness check of the expansion (256 cells, 2 points)"),
-    ("motorid.identify.least_squares", "_levenberg_marquardt_compressed", "optimistix LM on the compressed residual"),
-    ("motorid.identify.least_squares", "_predictions_jit", "per-sample predictions (noise, outliers, residuals)"),
+    ("motorid.identify.solver", "_levenberg_marquardt_compressed", "optimistix LM on the compressed residual"),
+    ("motorid.identify.problem", "predictions_jit", "per-sample predictions (noise, outliers, residuals)"),
 )
 
 

@@ -30,8 +30,8 @@ import numpy as np
 
 from motorid import model
 from motorid.errors import InputError
-from motorid.identify.least_squares import (RUNNING_CHANNELS, _Ctx, _normal_equations, bucket, pad,
-                                            pad_samples)
+from motorid.identify.problem import Ctx as _Ctx, bucket, normal_equations as _normal_equations, pad, pad_samples
+from motorid.identify.types import RUNNING_CHANNELS
 from motorid.model import Samples
 from motorid.units import PA_PER_BAR, RAD_S_PER_RPM
 

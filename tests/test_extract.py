@@ -8,6 +8,8 @@ import pytest
 from motorid.io import logs
 from motorid.errors import InputError
 from motorid.identify import extract as ex
+from motorid.identify import types
+from motorid.identify.breakaway import find_breakaway
 from motorid.model import default_parameters, make_samples, predict
 from motorid.model import MotorSpec, OilSpec
 
@@ -107,7 +109,7 @@ def test_find_breakaway_is_rate_and_noise_independent():
     for rate, noise, alpha in [(20.0, 1e-3, 300.0), (100.0, 0.05, 5.0), (5000.0, 0.01, 2.0), (1000.0, 0.0, 50.0)]:
         t = np.arange(0.0, 8.0, 1.0 / rate)
         w = -alpha * np.clip(t - 5.01, 0, None) + 0.2 + noise * rng.standard_normal(t.size)  # offset rest
-        b = ex.find_breakaway(t, w)
+        b = find_breakaway(t, w)
         rise = 3 * max(noise, 1e-3) / alpha  # time to climb out of the noise
         assert b.direction == -1
         assert abs(b.onset_time - 5.01) < max(1.0 / rate, 0.3 * rise), (rate, noise, alpha, b)
@@ -118,7 +120,7 @@ def test_no_breakaway_is_a_note_not_an_error():
     frame, _ = startability_run("S3", 100.0, t0=99.0)  # the ramp ends before the shaft moves
     moving, _ = startability_run("S4", 100.0, t0=-1.0)  # the log starts after breakaway
     d = ex.extract(pd.concat([frame, moving]), SPEC)
-    assert d.n_events == 0 and d.excluded[ex.NO_BREAKAWAY] == 2
+    assert d.n_events == 0 and d.excluded[types.NO_BREAKAWAY] == 2
     assert any("S3" in n and "no breakaway" in n and "never left rest" in n for n in d.notes)
     assert any("S4" in n and "already turning" in n for n in d.notes)
     assert list(d.runs["excluded"]) == ["no breakaway found"] * 2
@@ -142,7 +144,7 @@ def test_steady_state_drops_the_start_transient():
     assert t.min() < 8.0 * tau  # and not much later
     kept_after = np.sum(t > 3.0)
     assert kept_after >= 0.99 * np.sum(frame["time_s"] > 3.0)
-    assert d.excluded[ex.START_TRANSIENT] >= int(3.0 * tau * 100)
+    assert d.excluded[types.START_TRANSIENT] >= int(3.0 * tau * 100)
     true_acc = 10.0 / tau * np.exp(-t / tau)
     np.testing.assert_allclose(np.asarray(d.running.acceleration), true_acc, atol=2e-3)
     assert d.runs.loc[0, "n_steady"] == d.n_running
@@ -159,7 +161,7 @@ def test_measured_channels_align_with_samples():
     np.testing.assert_array_equal(np.asarray(d.running.theta), rows["theta_rad"].to_numpy())
     assert np.isnan(d.measured["torque"]).sum() == 6
     assert 800 not in d.frame_index and 801 not in d.frame_index
-    assert d.excluded[ex.MISSING_INPUT] == 2
+    assert d.excluded[types.MISSING_INPUT] == 2
     assert list(d.runs["run"][d.run_of_sample[[0, -1]]]) == ["R1", "R2"]
     assert list(d.runs["direction"]) == [1.0, -1.0]
     np.testing.assert_array_equal(np.asarray(d.running.direction), np.sign(rows["speed_rad_s"]))
@@ -192,20 +194,10 @@ def test_runs_without_steady_speed_or_too_short_are_noted():
     stuck = frame_of("T1", "constant_torque", t, 0.5 + 0 * t, 1e-4 * np.sin(t), 30.0, 40e5, 5e5)
     short = running_run("R9", 5.0).iloc[:5]
     d = ex.extract(pd.concat([stuck, short, running_run("R1", 5.0)]), SPEC)
-    assert d.excluded[ex.NO_STEADY_SPEED] >= t.size and d.excluded[ex.SHORT_RUN] == 1
+    assert d.excluded[types.NO_STEADY_SPEED] >= t.size and d.excluded[types.SHORT_RUN] == 1
     assert any("T1" in n and "no steady speed" in n for n in d.notes)
     assert any("R9" in n and "5 samples" in n for n in d.notes)
     assert set(d.runs["run"][d.run_of_sample]) == {"R1"}
-
-
-def test_smoothed_acceleration_follows_a_known_derivative():
-    t = np.arange(0.0, 2.0, 0.002)
-    w = 3.0 + 2.0 * t ** 2
-    np.testing.assert_allclose(ex.smoothed_acceleration(t, w)[5:-5], 4.0 * t[5:-5], rtol=1e-6, atol=1e-6)
-    jittered = np.sort(t + np.random.default_rng(0).uniform(0, 0.0015, t.size))
-    acc = ex.smoothed_acceleration(jittered, 3.0 + 2.0 * jittered ** 2)
-    np.testing.assert_allclose(acc[5:-5], 4.0 * jittered[5:-5], atol=0.05)
-    assert np.all(ex.smoothed_acceleration(t[:3], w[:3]) == 0.0)
 
 
 # ------------------------------------------------------------------ through the log reader
@@ -234,73 +226,6 @@ def test_bad_spec_or_frame_is_an_input_error():
         ex.extract(frame.drop(columns="speed_rad_s"), SPEC)
 
 
-def test_shaft_locked_speed_ripple_gives_its_true_acceleration_even_when_aliased():
-    """2500 rpm sampled at 50 Hz: a once-per-revolution speed wobble aliases; its
-    acceleration comes from θ, the plain derivative of sampled speed is wrong."""
-    from motorid.identify.extract import running_acceleration, smoothed_acceleration
-
-    rng = np.random.default_rng(11)
-    w0, amp, rate = 2500 * 2 * np.pi / 60, 0.4, 50.0
-    t = np.arange(400) / rate
-    theta = w0 * t + 0.3  # the wobble hardly moves θ: first order is enough for the truth
-    speed = w0 + amp * np.cos(theta) + 0.002 * rng.standard_normal(t.size)
-    true_acc = -amp * np.sin(theta) * w0
-    steady = np.ones(t.size, bool)
-    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), steady)
-    plain = smoothed_acceleration(t, speed)
-    inner = slice(5, -5)
-    assert np.sqrt(np.mean((got - true_acc)[inner] ** 2)) < 0.02 * np.sqrt(np.mean(true_acc**2))
-    assert np.sqrt(np.mean((plain - true_acc)[inner] ** 2)) > 0.5 * np.sqrt(np.mean(true_acc**2))
-    # no ripple: the same as the plain derivative up to the fitted noise
-    flat = w0 + 0.002 * rng.standard_normal(t.size)
-    a = running_acceleration(t, flat, np.mod(theta, 2 * np.pi), steady)
-    assert np.max(np.abs(a - smoothed_acceleration(t, flat))) < 0.05 * w0 * 0.002 * 10
-    # less than two revolutions: the plain derivative
-    assert np.array_equal(running_acceleration(t[:40], speed[:40], np.full(40, 0.1), steady[:40]),
-                          smoothed_acceleration(t[:40], speed[:40]))
-
-
-def test_shaft_ripple_where_two_orders_alias_onto_one_frequency():
-    """1000 rpm at 50 Hz: θ steps 120° a sample, so cos 2θ and cos θ read alike; the
-    first order is kept and the second, folded onto it, left out (the fit of both is
-    singular; it used to fall back to the plain derivative, off by the whole ripple)."""
-    from motorid.identify.extract import running_acceleration, smoothed_acceleration
-
-    rng = np.random.default_rng(2)
-    w0, amp, rate = 1000 * 2 * np.pi / 60, 0.3, 50.0
-    t = np.arange(300) / rate
-    theta = w0 * t + 0.4
-    speed = w0 + amp * np.cos(theta) + 0.005 * rng.standard_normal(t.size)
-    true_acc = -amp * np.sin(theta) * w0
-    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
-    rms = np.sqrt(np.mean(true_acc**2))
-    inner = slice(5, -5)
-    assert np.sqrt(np.mean((got - true_acc)[inner] ** 2)) < 0.05 * rms
-    assert np.sqrt(np.mean((smoothed_acceleration(t, speed) - true_acc)[inner] ** 2)) > 0.5 * rms
-
-
-def test_shaft_ripple_is_resolved_under_a_slow_speed_wander():
-    """A dynamometer's speed controller wanders slowly (here 2 Hz, three times the ripple's
-    amplitude): what the trend leaves of it raises the misfit, and the ripple, though
-    plainly there, no longer passed a strict F test (F ≈ 20 here against 30); it must be kept."""
-    from motorid.identify.extract import running_acceleration, smoothed_acceleration
-
-    rng = np.random.default_rng(4)
-    w0, amp, rate = 2500 * 2 * np.pi / 60, 0.2, 50.0
-    t = np.arange(100) / rate
-    theta = w0 * t + 1.1
-    wander = 0.6 * np.sin(2 * np.pi * 2.0 * t + 0.5) + 0.1 * rng.standard_normal(t.size).cumsum() / 3
-    speed = w0 + wander + amp * np.cos(theta) + 0.13 * rng.standard_normal(t.size)
-    ripple_acc = -amp * np.sin(theta) * w0
-    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
-    plain = smoothed_acceleration(t, speed)
-    inner = slice(5, -5)
-    # what is left is the wander's own slow acceleration and the noise, not the ripple
-    err = np.sqrt(np.mean((got - ripple_acc - smoothed_acceleration(t, w0 + wander))[inner] ** 2))
-    err_plain = np.sqrt(np.mean((plain - ripple_acc - smoothed_acceleration(t, w0 + wander))[inner] ** 2))
-    assert err < 0.35 * np.sqrt(np.mean(ripple_acc**2)) < err_plain
-
-
 def test_spikes_in_input_readings_leave_their_samples_out():
     """A spike in a pressure or speed reading would move its cell's model (the fit averages
     the inputs of a cell over all its samples); the sample is left out and counted."""
@@ -313,41 +238,13 @@ def test_spikes_in_input_readings_leave_their_samples_out():
     spiky.loc[hit[6:9], "speed_rad_s"] *= 3.0
     spiky.loc[hit[9:], "p_case_Pa"] -= 3e5
     d = ex.extract(spiky, SPEC)
-    assert d.excluded[ex.INPUT_SPIKE] == 12
+    assert d.excluded[types.INPUT_SPIKE] == 12
     assert set(hit).isdisjoint(d.frame_index)
     assert d.n_running == clean.n_running - 12
-    assert ex.INPUT_SPIKE not in clean.excluded
+    assert types.INPUT_SPIKE not in clean.excluded
     # the speed's derivative is bridged over the spikes, not thrown by them
     keep = np.isin(clean.frame_index, d.frame_index)
     np.testing.assert_allclose(np.asarray(d.running.acceleration), np.asarray(clean.running.acceleration)[keep],
                                atol=0.05)
 
 
-def test_input_spikes_leave_ripple_quantization_and_noise_alone():
-    rng = np.random.default_rng(0)
-    t = np.arange(3000) / 50.0
-    assert not ex.input_spikes(100 + 5 * np.sin(2 * np.pi * 7 * t) + 0.01 * rng.standard_normal(t.size)).any()
-    assert not ex.input_spikes(np.round(100 + 0.3 * rng.standard_normal(t.size))).any()
-    assert sum(ex.input_spikes(rng.standard_normal(500)).sum() for _ in range(200)) == 0
-    x = rng.standard_normal(500)
-    x[[0, 10, 11, 200, 499]] += 30.0
-    assert list(np.flatnonzero(ex.input_spikes(x))) == [0, 10, 11, 200, 499]
-
-
-def test_shaft_order_sampled_in_step_is_left_to_the_trend():
-    """1500 rpm at 50 Hz: the shaft turns half a revolution a sample, so order 2 reads as a
-    constant (and order 1 sits on the Nyquist frequency).  Neither may be fitted: a
-    'ripple' at order 2 fitted to the trend's leftovers came back as a constant false
-    acceleration, 2ω times its size."""
-    from motorid.identify.extract import aliased_cycles, running_acceleration, smoothed_acceleration
-
-    rng = np.random.default_rng(6)
-    w0, rate = 1500 * 2 * np.pi / 60, 50.0
-    t = np.arange(400) / rate
-    wander = 0.3 * np.sin(2 * np.pi * 0.37 * t) + 0.2 * np.sin(2 * np.pi * 1.3 * t + 1.0)
-    speed = w0 + wander + 0.02 * rng.standard_normal(t.size)
-    theta = w0 * t + 0.2 + np.cumsum(wander) / rate
-    cycles = aliased_cycles(t, speed, (1, 2))
-    assert cycles[2] < 1.0 and abs(cycles[1] - 200.0) < 1.0
-    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
-    np.testing.assert_array_equal(got, smoothed_acceleration(t, speed))

@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
-from motorid.identify.least_squares import FitOptions, FitResult, fit_least_squares
+from motorid.identify.least_squares import fit_least_squares
+from motorid.identify.types import FitOptions, FitResult
 from motorid.physics.registry import all_mechanisms
 
 
@@ -200,7 +201,7 @@ def _noise_rms(ls: FitResult, c: str):
 
 def diagnosis_document(dg: Diagnosis, spec) -> dict:
     """diagnosis.json: what was found, where, and what it did to the fit."""
-    from motorid.identify.results import _clean
+    from motorid.identify.results import json_safe as _clean
     from motorid.model import parameter_info
 
     mechs = []

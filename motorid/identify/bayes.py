@@ -37,7 +37,7 @@ These priors are hundreds of standard errors wide on any campaign that
 identifies the parameter, so the posterior is the likelihood's.
 
 The viscosity the model sees is the extraction's smoothed curve per run
-(:func:`motorid.identify.extract.smooth_viscosity`), whose error is common to a
+(:func:`motorid.identify.viscosity.smooth_viscosity`), whose error is common to a
 run.  Its effect on the parameters is linear to first order, β(μ + δμ) ≈ β(μ) +
 G z with z ~ N(0, I) per run (the least-squares fit's ``covariance_viscosity`` =
 G Gᵀ), so marginalizing it convolves the posterior with N(0, G Gᵀ): every draw
@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass
 
 import emcee
 import equinox as eqx
@@ -62,7 +61,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from motorid import model
-from motorid.identify.least_squares import FitResult, _Ctx, _Problem, _residual_natural
+from motorid.identify.problem import Ctx, weighted_residual
+from motorid.identify.types import BayesResult, FitResult
 
 SIZE_SCALED = {"TFc", "KL0", "KAB"}
 REFERENCE_DISPLACEMENT = 80e-6
@@ -77,38 +77,12 @@ def prior_scale(name: str, spec, mechanisms=()) -> float:
     return 100.0 * info.typical * size
 
 
-@dataclass
-class BayesResult:
-    names: list
-    chain: np.ndarray  # (steps, walkers, ndim) in natural units
-    log_prob: np.ndarray  # (steps, walkers)
-    median: dict
-    ci95: dict
-    std: dict
-    tau: dict
-    ess: dict
-    converged: bool
-    acceptance: float
-    steps: int
-    walkers: int
-    burn: int
-    thin: int
-    seconds: float
-    warnings: list
-    expansion_gap: float | None = None  # largest |Δ log p| of the expansion against the full model
-    breakaway_noise: str = "fixed"  # "marginalized" where σ_brk was integrated out (p(σ) ∝ 1/σ)
-
-    def samples(self) -> np.ndarray:
-        """Flat posterior draws after burn-in and thinning, (draws, ndim)."""
-        return self.chain[self.burn :: self.thin].reshape(-1, len(self.names))
-
-
-def _residual_of_z(z, ctx: _Ctx, center, scale):
+def _residual_of_z(z, ctx: Ctx, center, scale):
     p = center + z * scale
-    return _residual_natural({k: p[i] for i, k in enumerate(ctx.free)}, ctx)
+    return weighted_residual({k: p[i] for i, k in enumerate(ctx.free)}, ctx)
 
 
-def _breakaway_rows(ctx: _Ctx) -> tuple[int, int]:
+def _breakaway_rows(ctx: Ctx) -> tuple[int, int]:
     """(rows of the breakaway block at the end of the weighted residual, inlier events in it)."""
     if ctx.observed is None or "breakaway" not in ctx.observed:
         return 0, 0
@@ -124,7 +98,7 @@ def marginal_breakaway_loglike(s_brk, n_events: int, xp=np):
 
 
 @eqx.filter_jit
-def _log_posterior_batch(z, ctx: _Ctx, center, scale, positive, prior_sd, prior_mean=0.0,
+def _log_posterior_batch(z, ctx: Ctx, center, scale, positive, prior_sd, prior_mean=0.0,
                          brk_rows: int = 0, brk_events: int = 0):
     """log posterior at walkers z (W, ndim), z = (p − center)/scale, on the full model.
 
@@ -147,7 +121,7 @@ def _log_posterior_batch(z, ctx: _Ctx, center, scale, positive, prior_sd, prior_
 
 
 @eqx.filter_jit
-def _expansion(ctx: _Ctx, center, scale):
+def _expansion(ctx: Ctx, center, scale):
     """Residual r(z) = r0 + J z + ½ Σ H_ab z_a z_b: value, Jacobian and Hessian at z = 0."""
     f = lambda z: _residual_of_z(z, ctx, center, scale)  # noqa: E731
     z0 = jnp.zeros_like(center)
@@ -198,6 +172,120 @@ class QuadraticLikelihood:
         return sum(self.blocks(z))
 
 
+class _Target:
+    """The log-posterior of the sampler in z = (p − center)/scale, on the full model and
+    (``fast``) on its exact second-order expansion (:class:`QuadraticLikelihood`)."""
+
+    def __init__(self, ls: FitResult, spec, prior: dict | None, fast: bool, marginal_breakaway: bool):
+        names = list(ls.free)
+        ndim = len(names)
+        self.center = np.array([ls.values[k] for k in names])
+        std = np.array([ls.std[k] for k in names])
+        self.scale = np.where(std > 0, std, np.abs(self.center) * 1e-3 + 1e-300)
+        self.positive = np.array([model.parameter_info(k, ls.mechanisms).positive for k in names])
+        self.prior_sd = np.array([prior_scale(k, spec, ls.mechanisms) for k in names])
+        self.prior_mean = np.zeros(ndim)
+        for i, k in enumerate(names):
+            if prior and k in prior:
+                self.prior_mean[i], self.prior_sd[i] = (float(v) for v in prior[k])
+        ctx = ls.problem.ctx()
+        brk_rows, brk_events = _breakaway_rows(ctx)
+        if not marginal_breakaway or brk_events < 3:
+            brk_rows, brk_events = 0, 0
+        self.brk_rows, self.brk_events = brk_rows, brk_events
+        self.args = (ctx, jnp.asarray(self.center), jnp.asarray(self.scale), jnp.asarray(self.positive),
+                     jnp.asarray(self.prior_sd), jnp.asarray(self.prior_mean), brk_rows, brk_events)
+        self.quad = QuadraticLikelihood(ctx, self.center, self.scale, split=brk_rows) if fast else None
+
+    def full(self, z):
+        return np.asarray(_log_posterior_batch(jnp.asarray(z), *self.args))
+
+    def __call__(self, z):
+        z = np.atleast_2d(z)
+        if self.quad is None:
+            return self.full(z)
+        p = self.center + z * self.scale
+        inside = np.all(np.where(self.positive, p > 0, True), axis=1)
+        if self.brk_rows:
+            s_run, s_brk = self.quad.blocks(z)
+            log_like = -0.5 * s_run + marginal_breakaway_loglike(s_brk, self.brk_events)
+        else:
+            log_like = -0.5 * self.quad.chi2(z)
+        lp = log_like - 0.5 * np.sum(((p - self.prior_mean) / self.prior_sd) ** 2, axis=1)
+        return np.where(inside, lp, -np.inf)
+
+
+def _start(ls: FitResult, log_prob, walkers: int, rng) -> np.ndarray:
+    """Walkers drawn from the least-squares Gaussian (in z), pulled in until inside the support.
+
+    The posterior is close to that Gaussian: starting there, the ensemble need not expand
+    from a small ball (DE moves expand slowly)."""
+    ndim = len(ls.free)
+    corr = np.nan_to_num(ls.correlation, nan=0.0)
+    np.fill_diagonal(corr, 1.0)
+    try:
+        chol = np.linalg.cholesky(corr + 1e-9 * np.eye(ndim))
+    except np.linalg.LinAlgError:
+        chol = np.eye(ndim)
+    z0 = rng.standard_normal((walkers, ndim)) @ chol.T
+    for _ in range(100):
+        bad = ~np.isfinite(log_prob(z0))
+        if not bad.any():
+            break
+        z0[bad] *= 0.5
+    return z0
+
+
+def _run_chain(sampler, state, chunk: int, max_steps: int, min_tau_multiple: float, max_seconds, show: bool):
+    """Run in chunks until the chain is ``min_tau_multiple`` τ long and τ has settled →
+    (converged, τ per parameter, warnings, seconds)."""
+    t0 = time.time()
+    tau_prev, converged, tau = None, False, np.full(sampler.ndim, np.nan)
+    warnings = []
+    while sampler.iteration < max_steps:
+        state = sampler.run_mcmc(state, chunk, progress=False)
+        tau = sampler.get_autocorr_time(tol=0)
+        n = sampler.iteration
+        settled = tau_prev is not None and abs(np.max(tau) - np.max(tau_prev)) < 0.1 * np.max(tau)
+        if show:
+            print(f"\r  emcee: {n} steps × {sampler.nwalkers} walkers, τ_max {np.max(tau):.0f} "
+                  f"(need {min_tau_multiple:.0f}τ = {min_tau_multiple * np.max(tau):.0f} steps), "
+                  f"{time.time() - t0:.0f} s", end="", file=sys.stderr, flush=True)
+        if np.all(np.isfinite(tau)) and n >= min_tau_multiple * np.max(tau) and settled:
+            converged = True
+            break
+        tau_prev = tau
+        if max_seconds is not None and time.time() - t0 > max_seconds:
+            warnings.append(f"stopped after {max_seconds:.0f} s before reaching {min_tau_multiple:.0f} τ")
+            break
+    if show:
+        print(file=sys.stderr)
+    if not converged and not warnings:
+        warnings.append(f"stopped at max_steps={max_steps} before reaching {min_tau_multiple:.0f} τ")
+    return converged, tau, warnings, t0
+
+
+def _expansion_gap(target: _Target, chain_z, burn: int, rng) -> float:
+    """Largest |Δ log p| of the expansion against the full model on up to 64 posterior draws."""
+    draws = chain_z[burn:].reshape(-1, chain_z.shape[-1])
+    pick = draws[rng.choice(len(draws), size=min(64, len(draws)), replace=False)]
+    full = target.full(pick)
+    approx = target(pick)
+    ok = np.isfinite(full) & np.isfinite(approx)
+    return float(np.max(np.abs(full[ok] - approx[ok]))) if ok.any() else np.inf
+
+
+def _with_viscosity_error(ls: FitResult, chain, rng):
+    """The smoothed viscosity's run-level error (see the module docstring): each draw moved
+    by its own draw from N(0, covariance_viscosity)."""
+    visc = getattr(ls, "covariance_viscosity", None)
+    if visc is not None and np.any(visc):
+        w, v = np.linalg.eigh(0.5 * (visc + visc.T))
+        root = v * np.sqrt(np.clip(w, 0.0, None))
+        chain = chain + rng.standard_normal(chain.shape) @ root.T
+    return chain
+
+
 def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
                      min_tau_multiple: float = 50.0, max_steps: int = 40000, chunk: int = 500,
                      seed: int = 0, progress: bool | None = None, max_seconds: float | None = None,
@@ -215,123 +303,38 @@ def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
         p(σ_brk) ∝ 1/σ_brk (default) instead of holding the least-squares value
         fixed; only where there are at least 3 breakaway events
     """
-    problem: _Problem = ls.problem
     names = list(ls.free)
     ndim = len(names)
     if ndim == 0:
         raise ValueError("no identifiable parameter to sample")
     walkers = walkers or max(4 * ndim, 24)
     walkers += walkers % 2
-    center = np.array([ls.values[k] for k in names])
-    std = np.array([ls.std[k] for k in names])
-    scale = np.where(std > 0, std, np.abs(center) * 1e-3 + 1e-300)
-    positive = np.array([model.parameter_info(k, ls.mechanisms).positive for k in names])
-    prior_sd = np.array([prior_scale(k, spec, ls.mechanisms) for k in names])
-    prior_mean = np.zeros(ndim)
-    for i, k in enumerate(names):
-        if prior and k in prior:
-            prior_mean[i], prior_sd[i] = (float(v) for v in prior[k])
-    ctx = problem.ctx()
-    brk_rows, brk_events = _breakaway_rows(ctx)
-    if not marginal_breakaway or brk_events < 3:
-        brk_rows, brk_events = 0, 0
-    args = (ctx, jnp.asarray(center), jnp.asarray(scale), jnp.asarray(positive), jnp.asarray(prior_sd),
-            jnp.asarray(prior_mean), brk_rows, brk_events)
-
-    def log_prob_full(z):
-        return np.asarray(_log_posterior_batch(jnp.asarray(z), *args))
-
-    quad = QuadraticLikelihood(ctx, center, scale, split=brk_rows) if fast else None
-
-    def log_prob(z):
-        z = np.atleast_2d(z)
-        if quad is None:
-            return log_prob_full(z)
-        p = center + z * scale
-        inside = np.all(np.where(positive, p > 0, True), axis=1)
-        if brk_rows:
-            s_run, s_brk = quad.blocks(z)
-            log_like = -0.5 * s_run + marginal_breakaway_loglike(s_brk, brk_events)
-        else:
-            log_like = -0.5 * quad.chi2(z)
-        lp = log_like - 0.5 * np.sum(((p - prior_mean) / prior_sd) ** 2, axis=1)
-        return np.where(inside, lp, -np.inf)
-
+    target = _Target(ls, spec, prior, fast, marginal_breakaway)
     rng = np.random.default_rng(seed)
-    corr = np.nan_to_num(ls.correlation, nan=0.0)
-    np.fill_diagonal(corr, 1.0)
-    try:
-        chol = np.linalg.cholesky(corr + 1e-9 * np.eye(ndim))
-    except np.linalg.LinAlgError:
-        chol = np.eye(ndim)
-    # the posterior is close to the least-squares Gaussian: start the ensemble there,
-    # so it need not expand from a small ball (DE moves expand slowly)
-    z0 = rng.standard_normal((walkers, ndim)) @ chol.T
-    # keep the start inside the support
-    for _ in range(100):
-        bad = ~np.isfinite(log_prob(z0))
-        if not bad.any():
-            break
-        z0[bad] *= 0.5
+    z0 = _start(ls, target, walkers, rng)
     # differential-evolution moves mix about three times faster than the stretch
     # move on the nearly Gaussian, correlated posteriors of this model (τ ≈ 30
     # steps, not ≈ 100, in 9 dimensions).  (The DE-snooker move was tried and
     # left out: on a 9-D Gaussian test it came out 6 % too narrow.)
     moves = [(emcee.moves.DEMove(), 1.0)]
-    sampler = emcee.EnsembleSampler(walkers, ndim, log_prob, vectorize=True, moves=moves)
+    sampler = emcee.EnsembleSampler(walkers, ndim, target, vectorize=True, moves=moves)
     sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
     show = sys.stderr.isatty() if progress is None else progress
-    t0 = time.time()
-    state = z0
-    tau_prev, converged, tau = None, False, np.full(ndim, np.nan)
-    warnings = []
-    while sampler.iteration < max_steps:
-        state = sampler.run_mcmc(state, chunk, progress=False)
-        tau = sampler.get_autocorr_time(tol=0)
-        n = sampler.iteration
-        settled = tau_prev is not None and abs(np.max(tau) - np.max(tau_prev)) < 0.1 * np.max(tau)
-        if show:
-            print(f"\r  emcee: {n} steps × {walkers} walkers, τ_max {np.max(tau):.0f} "
-                  f"(need {min_tau_multiple:.0f}τ = {min_tau_multiple * np.max(tau):.0f} steps), "
-                  f"{time.time() - t0:.0f} s", end="", file=sys.stderr, flush=True)
-        if np.all(np.isfinite(tau)) and n >= min_tau_multiple * np.max(tau) and settled:
-            converged = True
-            break
-        tau_prev = tau
-        if max_seconds is not None and time.time() - t0 > max_seconds:
-            warnings.append(f"stopped after {max_seconds:.0f} s before reaching {min_tau_multiple:.0f} τ")
-            break
-    if show:
-        print(file=sys.stderr)
-    if not converged and not warnings:
-        warnings.append(f"stopped at max_steps={max_steps} before reaching {min_tau_multiple:.0f} τ")
+    converged, tau, warnings, t0 = _run_chain(sampler, z0, chunk, max_steps, min_tau_multiple, max_seconds, show)
     tau_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else float(sampler.iteration)
     burn = int(min(max(3 * tau_max, 1), sampler.iteration // 2))
     thin = max(int(tau_max / 2), 1)
     chain_z = sampler.get_chain()
-    if quad is not None:
+    expansion_gap = None
+    if target.quad is not None:
         # the expansion must agree with the full model where the posterior lives
-        draws = chain_z[burn:].reshape(-1, ndim)
-        pick = draws[rng.choice(len(draws), size=min(64, len(draws)), replace=False)]
-        full = log_prob_full(pick)
-        approx = log_prob(pick)
-        ok = np.isfinite(full) & np.isfinite(approx)
-        gap = float(np.max(np.abs(full[ok] - approx[ok]))) if ok.any() else np.inf
-        if gap > 0.05:
-            warnings.append(f"second-order expansion off by {gap:.3g} in log-posterior; resampled on the full model")
+        expansion_gap = _expansion_gap(target, chain_z, burn, rng)
+        if expansion_gap > 0.05:
+            warnings.append(f"second-order expansion off by {expansion_gap:.3g} in log-posterior; "
+                            f"resampled on the full model")
             return sample_posterior(ls, spec, walkers, min_tau_multiple, max_steps, chunk, seed, progress,
                                     max_seconds, fast=False, prior=prior, marginal_breakaway=marginal_breakaway)
-        expansion_gap = gap
-    else:
-        expansion_gap = None
-    chain = center + chain_z * scale
-    visc = getattr(ls, "covariance_viscosity", None)
-    if visc is not None and np.any(visc):
-        # the smoothed viscosity's run-level error (see the module docstring): each
-        # draw moved by its own draw from N(0, covariance_viscosity)
-        w, v = np.linalg.eigh(0.5 * (visc + visc.T))
-        root = v * np.sqrt(np.clip(w, 0.0, None))
-        chain = chain + rng.standard_normal(chain.shape) @ root.T
+    chain = _with_viscosity_error(ls, target.center + chain_z * target.scale, rng)
     flat = chain[burn::thin].reshape(-1, ndim)
     q = np.percentile(flat, [2.5, 50.0, 97.5], axis=0)
     kept = (sampler.iteration - burn) * walkers
@@ -345,5 +348,5 @@ def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
         converged=bool(converged), acceptance=float(np.mean(sampler.acceptance_fraction)),
         steps=int(sampler.iteration), walkers=walkers, burn=burn, thin=thin,
         seconds=time.time() - t0, warnings=warnings, expansion_gap=expansion_gap,
-        breakaway_noise="marginalized" if brk_rows else "fixed",
+        breakaway_noise="marginalized" if target.brk_rows else "fixed",
     )

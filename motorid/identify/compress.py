@@ -26,11 +26,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from motorid._aot import cached_jit
-from motorid.identify import least_squares as ls
+from motorid.identify.problem import predictions
+from motorid.identify.types import CHANNELS
 
 
 def _flat_predictions(vector, names, ctx, order):
-    pred = ls._predictions({k: vector[i] for i, k in enumerate(names)}, ctx)
+    pred = predictions({k: vector[i] for i, k in enumerate(names)}, ctx)
     return jnp.concatenate([pred[c] for c in order])
 
 
@@ -59,7 +60,7 @@ def _channel_terms(vector, names, ctx, channels, columns, pairs):
     out = {}
     for c, cols, prs in zip(channels, columns, pairs):
         def f(v, c=c):
-            return ls._predictions({k: v[i] for i, k in enumerate(names)}, ctx)[c]
+            return predictions({k: v[i] for i, k in enumerate(names)}, ctx)[c]
 
         value = f(vector)
         jvp = lambda t, f=f: jax.jvp(f, (vector,), (t,))[1]  # noqa: E731
@@ -101,7 +102,7 @@ class Expansion:
     def build(cls, problem, values: dict, free: list, tol: float = 1e-9):
         """The expansion of ``problem``'s cell predictions, or None if the model is not quadratic."""
         ctx = problem.ctx()
-        order = tuple(c for c in ls.CHANNELS if c in ctx.observed)
+        order = tuple(c for c in CHANNELS if c in ctx.observed)
         names = tuple(free)
         p = len(names)
         p0 = np.array([values[k] for k in names], dtype=np.float64)

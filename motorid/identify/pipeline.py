@@ -6,7 +6,8 @@ import time
 from dataclasses import dataclass
 from typing import Sequence
 
-from motorid.identify.least_squares import FitOptions, FitResult, fit_least_squares
+from motorid.identify.least_squares import fit_least_squares
+from motorid.identify.types import FitOptions, FitResult
 
 
 @dataclass

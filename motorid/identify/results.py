@@ -11,81 +11,11 @@ import numpy as np
 
 from motorid import model
 from motorid._atomic import write_bytes_atomic
-from motorid.identify.least_squares import BREAKAWAY_ONLY, CHANNEL_UNITS, FitResult
+from motorid.identify.covariance import interval_dof, interval_factor
+from motorid.identify.types import CHANNEL_UNITS, FitResult
 
 RESULT_FILE = "result.json"
 CHAIN_FILE = "chain.npz"
-
-
-def interval_dof(ls: FitResult) -> dict:
-    """Effective degrees of freedom of each fitted parameter's standard error.
-
-    A standard error is as uncertain as the noise levels it rests on.  The
-    running channels' levels come from dozens to hundreds of residuals per run
-    (treated as exact here); the breakaway level σ_brk from one residual per
-    event, n events less the breakaway-only parameters (K_FS, K_s) — the same
-    count the fit divides by.  With V = (JᵀWJ)⁻¹ and A_brk the breakaway
-    events' share of JᵀWJ, the share of parameter i's variance that scales with
-    σ_brk² is f_i = (V A_brk V)_ii / V_ii, and Welch–Satterthwaite gives
-    ν_i = ν_brk / f_i²: ≈ n − 2 for K_FS and K_s, effectively infinite for the
-    parameters the running data determine.  Returns name → ν (inf where no
-    breakaway noise enters).
-    """
-    free = list(ls.free)
-    out = {k: float("inf") for k in free}
-    problem = getattr(ls, "problem", None)
-    if not free or problem is None or not getattr(problem, "has_events", False) or problem.cells is None:
-        return out
-    n_events = int(np.sum(ls.inliers.get("breakaway", np.zeros(0, bool))))
-    nu_brk = (n_events - sum(1 for k in BREAKAWAY_ONLY if k in free)
-              - (1 if getattr(ls, "breakaway_noise_shape", 0.0) > 0 else 0))  # the variance model's shape
-    if nu_brk < 1:
-        return out
-    from motorid.identify.least_squares import _normal_equations
-
-    ctx = problem.ctx()
-    brk = ctx._replace(running=None, observed={"breakaway": ctx.observed["breakaway"]},
-                       weights={"breakaway": ctx.weights["breakaway"]})
-    values = {k: np.asarray(ls.values[k], dtype=np.float64) for k in free}
-    A_brk = np.asarray(_normal_equations(values, brk)[0])
-    total = np.asarray(ls.covariance)
-    visc = getattr(ls, "covariance_viscosity", None)
-    brk = getattr(ls, "covariance_breakaway", None)  # the sandwich's widening, also σ_brk's
-    scale = max(ls.reduced_chi2, 1.0)
-    V = (total - (0.0 if visc is None else visc) - (0.0 if brk is None else brk)) / scale
-    d = np.diag(total)  # the viscosity's share rests on hundreds of readings per run: ν = ∞
-    with np.errstate(invalid="ignore", divide="ignore"):
-        # (the sandwich's widening scales with the events' scatter as the rest of their share)
-        f = np.clip((np.diag(V @ A_brk @ V) + (0.0 if brk is None else np.diag(brk) / scale)) / d, 0.0, 1.0)
-    for i, k in enumerate(free):
-        if np.isfinite(f[i]) and f[i] > 1e-6:
-            out[k] = float(nu_brk / f[i] ** 2)
-    return out
-
-
-def interval_factor(dof: float, level: float = 0.95) -> float:
-    """Half-width of a central ``level`` interval in standard errors: Student-t
-    with ``dof`` degrees of freedom (the normal quantile where dof is infinite).
-
-    From ν = 5 on by the Cornish-Fisher expansion of the t quantile in 1/ν
-    (Abramowitz & Stegun 26.7.5, four terms: relative error below 1e-4 at ν = 5,
-    1e-7 at ν = 20), which keeps scipy.stats (a second of import) out of
-    ``motorid fit``; below that, scipy's exact quantile.
-    """
-    from statistics import NormalDist
-
-    q = 0.5 * (1.0 + level)
-    if not np.isfinite(dof) or dof > 1e6:
-        return NormalDist().inv_cdf(q)
-    if dof < 5:
-        from scipy import stats
-
-        return float(stats.t.ppf(q, dof))
-    z = NormalDist().inv_cdf(q)
-    g = ((z**3 + z) / 4, (5 * z**5 + 16 * z**3 + 3 * z) / 96,
-         (3 * z**7 + 19 * z**5 + 17 * z**3 - 15 * z) / 384,
-         (79 * z**9 + 776 * z**7 + 1482 * z**5 - 1920 * z**3 - 945 * z) / 92160)
-    return float(z + sum(gk / dof ** (k + 1) for k, gk in enumerate(g)))
 
 
 def versions() -> dict:
@@ -103,14 +33,14 @@ def versions() -> dict:
     return out
 
 
-def _clean(x):
+def json_safe(x):
     """JSON-safe: numpy scalars to float, NaN/inf to None."""
     if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
+        return {str(k): json_safe(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
+        return [json_safe(v) for v in x]
     if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
+        return json_safe(x.tolist())
     if isinstance(x, (np.bool_, bool)):
         return bool(x)
     if isinstance(x, (np.integer,)):
@@ -184,7 +114,7 @@ def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict 
             "breakaway_noise": ("integrated out under p(σ_brk) ∝ 1/σ_brk" if bayes.breakaway_noise == "marginalized"
                                 else "held at the least-squares value"),
         }
-    return _clean(doc)
+    return json_safe(doc)
 
 
 def dataset_summary(ds) -> dict:

@@ -23,7 +23,7 @@ import numpy as np
 from motorid import model
 from motorid.errors import InputError
 from motorid.io.results import read_json
-from motorid.identify.least_squares import _robust_std
+from motorid.robust import robust_std as _robust_std
 from motorid.units import PA_PER_BAR, RUNNING_CHANNELS
 
 RUNNING = RUNNING_CHANNELS

@@ -1,67 +1,17 @@
-"""The viscometer's readings smoothed per run, and the error that smoothing leaves carried into the fit."""
+"""motorid.identify.covariance: the smoothed viscosity's error carried into the fit, the intervals."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from motorid.identify.extract import ViscositySmoothing, extract, smooth_viscosity
-from motorid.identify.least_squares import FitOptions, fit_least_squares
+from motorid.identify.extract import extract
+from motorid.identify.covariance import covariance_from_normal, viscosity_covariance, viscosity_jacobians
+from motorid.identify.least_squares import fit_least_squares
+from motorid.identify.solver import backend_for
+from motorid.identify.types import FitOptions, ViscositySmoothing
 
 from conftest import simulated
-
-
-def _slow_curve(t):
-    # 40 mPa·s oil warming slowly: viscosity falls about 2 % over the run, not a polynomial
-    return 0.04 * np.exp(-0.02 * (t - t[0]) / np.ptp(t)) * (1 + 0.002 * np.sin(1.3 * t / np.ptp(t)))
-
-
-def test_smoothed_viscosity_error_matches_its_stated_covariance():
-    """Over many noise draws the smoothed curve's error at every sample has the
-    variance its factor states (z² averages to 1), and is 1/√n-ish of the
-    reading noise: the run-level error, not the readings' 0.3 %."""
-    rng = np.random.default_rng(3)
-    t = np.linspace(0.0, 20.0, 400)
-    true = _slow_curve(t)
-    z2, ratio = [], []
-    for _ in range(200):
-        mu = true * (1 + 0.003 * rng.standard_normal(t.size))
-        smooth, degree, sigma, factor, center, half = smooth_viscosity(t, mu)
-        assert degree >= 0
-        err = smooth - true
-        var = np.sum(ViscositySmoothing(np.array([center]), np.array([half]), factor[None]).modes(
-            np.zeros(t.size, int), t) ** 2, axis=1)
-        z2.append(np.mean(err**2 / var))
-        ratio.append(np.std(err / true) / 0.003)
-    assert 0.8 < np.mean(z2) < 1.25
-    assert np.mean(ratio) < 0.2  # the readings' scatter is gone, only the curve's error is left
-
-
-def test_spikes_do_not_move_the_curve():
-    rng = np.random.default_rng(4)
-    t = np.linspace(0.0, 10.0, 300)
-    true = np.full(t.size, 0.03)
-    mu = true * (1 + 0.003 * rng.standard_normal(t.size))
-    mu[[50, 51, 200]] = 0.06
-    smooth, degree, *_ = smooth_viscosity(t, mu)
-    assert degree >= 0
-    assert np.max(np.abs(smooth / true - 1)) < 0.002
-
-
-@pytest.mark.parametrize("case", ["step", "held", "short"])
-def test_readings_that_are_not_a_slow_curve_plus_white_noise_are_used_as_read(case):
-    rng = np.random.default_rng(5)
-    t = np.linspace(0.0, 10.0, 300)
-    if case == "step":  # oil temperature steps halfway: no low-degree polynomial follows it
-        mu = np.where(t < 5.0, 0.04, 0.036) * (1 + 0.003 * rng.standard_normal(t.size))
-    elif case == "held":  # a bench that logs one held value
-        mu = np.full(t.size, 0.04)
-    else:
-        t, mu = t[:15], 0.04 * (1 + 0.003 * rng.standard_normal(15))
-    smooth, degree, sigma, factor, *_ = smooth_viscosity(t, mu)
-    assert degree == -1
-    np.testing.assert_array_equal(smooth, mu)
-    assert not np.any(factor)
 
 
 def test_fit_carries_the_viscosity_error_as_a_refit_would_show_it():
@@ -83,8 +33,6 @@ def test_fit_carries_the_viscosity_error_as_a_refit_would_show_it():
     modes = data.viscosity_error.modes(data.run_of_sample, np.asarray(data.running.time))
     hold = FitOptions(fixed_noise={c: ls.noise_by_run[c] for c in ls.noise_by_run} | {"breakaway": ls.noise["breakaway"]},
                       fixed_inliers=ls.inliers)
-    from motorid.identify.least_squares import _covariance, viscosity_covariance
-
     base = fit_least_squares(data, spec, options=hold)
     # the share of V that one (run, mode) pair contributes, from a refit
     counts = np.bincount(data.run_of_sample)
@@ -102,10 +50,8 @@ def test_fit_carries_the_viscosity_error_as_a_refit_would_show_it():
                                                                        data.viscosity_error.half_span, only))
     problem = base.problem
     problem.data = one
-    from motorid.identify.least_squares import _backend
-
-    JtJ = _backend(problem, base.values, free, FitOptions()).normal(base.values)[0]
-    V1 = viscosity_covariance(problem, base.values, _covariance(JtJ))[0]
+    JtJ = backend_for(problem, base.values, free, FitOptions()).normal(base.values)[0]
+    V1 = viscosity_covariance(problem, base.values, covariance_from_normal(JtJ))[0]
     # (the parameters this mode moves most; a move 30× smaller, such as K_L_a1's here, also
     # feels the refit's exact Hessian, which differs from Gauss-Newton's JᵀJ by Σ r ∂²r)
     for k in ("KL0", "KL_b1", "KAB"):
@@ -151,8 +97,6 @@ def test_cells_carry_the_mean_leakage_when_viscosity_varies_within_a_cell():
     var(μ)/μ² and biases K_L0 and K_AB up).  Flows made by the model itself from
     per-sample viscosities that swing ±15 % within every cell are fitted back exactly."""
     from motorid import model
-    from motorid.identify.least_squares import FitOptions
-
     frame, spec, truth = simulated(seed=3)
     data = extract(frame, spec)
     t = np.asarray(data.running.time)
@@ -175,21 +119,44 @@ def test_cells_carry_the_mean_leakage_when_viscosity_varies_within_a_cell():
 def test_viscosity_jacobians_from_the_expansion_match_the_jax_jacobian():
     """The covariance's fast path (∂r/∂β from the fit's exact quadratic expansion,
     ∂r/∂μ from two passes of the predictions) against forward-mode JAX over every cell."""
-    from motorid.identify.least_squares import _viscosity_jacobians
-
     frame, spec, _ = simulated(seed=5)
     data = extract(frame, spec)
     ls = fit_least_squares(data, spec)
     problem = ls.problem
-    assert getattr(problem, "_expansion", None) is not None
+    assert problem.expansion is not None
     values = {k: ls.values[k] for k in ls.free}
     ctx = problem.ctx()
-    fast, g_fast = _viscosity_jacobians(problem, values, ctx)
-    problem._expansion = None  # the fallback: a Jacobian program over every cell
-    slow, g_slow = _viscosity_jacobians(problem, values, ctx)
+    fast, g_fast = viscosity_jacobians(problem, values, ctx)
+    problem.expansion = None  # the fallback: a Jacobian program over every cell
+    slow, g_slow = viscosity_jacobians(problem, values, ctx)
     assert set(g_fast) == set(g_slow) == {"torque", "q_a", "q_b", "q_case"}
     for c in g_fast:
         np.testing.assert_allclose(g_fast[c], g_slow[c], rtol=1e-5, atol=1e-7 * np.abs(g_slow[c]).max())
     for j in range(slow.shape[1]):
         np.testing.assert_allclose(fast[:, j], slow[:, j], rtol=1e-5, atol=1e-7 * np.abs(slow[:, j]).max())
     assert np.abs(slow).max() > 0
+
+
+@pytest.mark.parametrize("dof", [5.0, 7.5, 12.0, 28.0, 300.0])
+@pytest.mark.parametrize("level", [0.6827, 0.95])
+def test_t_quantile_without_scipy_stats_matches_scipy(dof, level):
+    from scipy import stats
+
+    from motorid.identify.covariance import interval_factor
+
+    assert interval_factor(dof, level) == pytest.approx(stats.t.ppf(0.5 + level / 2, dof), rel=1.2e-4)
+
+
+def test_covariance_from_the_normal_matrix_inverts_it_over_columns_of_any_scale():
+    rng = np.random.default_rng(9)
+    J = rng.standard_normal((30, 3)) * np.array([1e-12, 1.0, 1e6])  # columns 18 decades apart
+    JtJ = J.T @ J
+    cov = covariance_from_normal(JtJ)
+    s = np.sqrt(np.diag(JtJ))  # (in units of each column's own size)
+    np.testing.assert_allclose((cov * np.outer(s, s)) @ (JtJ / np.outer(s, s)), np.eye(3), atol=1e-9)
+    np.testing.assert_allclose(np.diag(cov), np.diag(np.linalg.inv(JtJ)), rtol=1e-6)
+    # a direction the data do not see has no variance (a pseudo-inverse, not an error)
+    Js = np.column_stack([J[:, 1], J[:, 1]])
+    cs = covariance_from_normal(Js.T @ Js)
+    assert np.all(np.isfinite(cs))
+    np.testing.assert_allclose(cs @ np.array([1.0, -1.0]), 0.0, atol=1e-12)

@@ -10,7 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from motorid.identify import extract as ex
+from motorid.identify.breakaway import _hinge_costs, find_breakaway
+from motorid.identify.events import value_at_onset
+from motorid.identify.onset_angle import place_limited_onset
 
 RATE = 25.0  # Hz: 40 ms between samples
 RAMP = 2.5e5  # Pa/s on the inlet
@@ -34,7 +36,7 @@ def onset_errors(alpha, phases, **kw):
     for ph in phases:
         t0 = 4.0 + ph / RATE
         t, w, th, _ = fast_breakaway(t0, alpha, **kw)
-        out.append(ex.find_breakaway(t, w, theta=th).onset_time - t0)
+        out.append(find_breakaway(t, w, theta=th).onset_time - t0)
     return np.array(out)
 
 
@@ -68,8 +70,8 @@ def test_pressure_at_onset_follows_the_ramp_at_every_phase():
     for ph in PHASES[::3]:
         t0 = 4.0 + ph / RATE
         t, w, th, inlet = fast_breakaway(t0, 40.0, angle_step=math.radians(0.01))
-        b = ex.find_breakaway(t, w, theta=th)
-        p = ex.value_at_onset(t, inlet, b.onset_time, 50)
+        b = find_breakaway(t, w, theta=th)
+        p = value_at_onset(t, inlet, b.onset_time, 50)
         assert abs(p - (50e5 + RAMP * t0)) < 0.25 * RAMP / RATE, (ph, p)  # a quarter sample of ramp
 
 
@@ -79,34 +81,16 @@ def test_reading_against_the_motion_just_before_the_onset_is_not_motion():
     k = int(np.searchsorted(t, t0))  # first moving sample
     w[k - 1] = -5e-3  # a reading against the motion at the last sample at rest
     w[: k - 1] += 1e-3 * np.random.default_rng(3).standard_normal(k - 1)
-    b = ex.find_breakaway(t, w, theta=th)
+    b = find_breakaway(t, w, theta=th)
     assert b.onset_time == pytest.approx(t0, abs=1e-3)
 
 
 def test_without_the_angle_a_single_growth_sample_gives_the_middle_of_the_interval():
     t0 = 4.0 + 0.5 / RATE
     t, w, _, _ = fast_breakaway(t0, 100.0)  # on the limit at the first moving sample
-    b = ex.find_breakaway(t, w)
+    b = find_breakaway(t, w)
     k = int(np.searchsorted(t, t0))
     assert b.onset_time == pytest.approx(0.5 * (t[k - 1] + t[k]))
-
-
-def test_breakaway_noise_grows_with_the_port_pressures_where_the_events_show_it():
-    from motorid.identify.least_squares import breakaway_noise
-
-    rng = np.random.default_rng(11)
-    p = np.repeat([60e5, 130e5, 235e5], 100)
-    x2 = p**2 + (7e5) ** 2
-    ref = np.median(x2)
-    s = 0.02 * np.sqrt(1.0 + 1.0 * x2 / ref)
-    s0, gamma, ref_out = breakaway_noise(s * rng.standard_normal(p.size), x2, k=2)
-    assert ref_out == pytest.approx(ref)
-    assert 0.5 < gamma < 2.0 and s0 == pytest.approx(0.02, rel=0.15)
-    # even scatter: the shape comes out near nothing
-    s0, gamma, _ = breakaway_noise(0.03 * rng.standard_normal(p.size), x2, k=2)
-    assert gamma < 0.15 and s0 == pytest.approx(0.03, rel=0.1)
-    # too few events to tell: one level
-    assert breakaway_noise(np.array([0.01, -0.02, 0.03]), x2[:3], k=2)[1] == 0.0
 
 
 def _campaign_of_fast_breakaways(phases, loads, angle_step=math.radians(0.01), w_max=1.0472):
@@ -150,13 +134,13 @@ def test_onsets_on_the_speed_limit_take_the_acceleration_of_the_other_events():
     data = extract(frame, spec)
     assert data.n_events == len(loads)
     err = np.array([data.onset_time[i] - truth[run] for i, run in enumerate(data.event_runs)])
-    limited = np.array([ex.find_breakaway(g.time_s.to_numpy(), g.speed_rad_s.to_numpy(),
+    limited = np.array([find_breakaway(g.time_s.to_numpy(), g.speed_rad_s.to_numpy(),
                                           theta=g.theta_rad.to_numpy()).limited is not None
                         for _, g in frame.groupby("run_id", sort=True)])
     assert 5 <= limited.sum() <= len(loads) - 8  # both kinds of event are there
     assert np.max(np.abs(err)) < 0.5e-3, err
     # the middle of the angle's interval, as each run alone gives it, was off by far more
-    middle = np.array([ex.find_breakaway(g.time_s.to_numpy(), g.speed_rad_s.to_numpy(),
+    middle = np.array([find_breakaway(g.time_s.to_numpy(), g.speed_rad_s.to_numpy(),
                                          theta=g.theta_rad.to_numpy()).onset_time - truth[run]
                        for run, g in frame.groupby("run_id", sort=True)])
     assert np.max(np.abs(middle[limited])) > 2e-3
@@ -168,9 +152,9 @@ def test_place_limited_onset_inverts_the_kinematics():
     for alpha, ph in [(40.0, 0.1), (80.0, 0.5), (200.0, 0.7)]:  # u₁ past u_s = W/a each
         t0 = 4.0 + ph / RATE
         t, w, th, _ = fast_breakaway(t0, alpha)
-        b = ex.find_breakaway(t, w, theta=th)
+        b = find_breakaway(t, w, theta=th)
         assert b.limited is not None
-        assert ex.place_limited_onset(b.limited, alpha) == pytest.approx(t0, abs=1e-6)
+        assert place_limited_onset(b.limited, alpha) == pytest.approx(t0, abs=1e-6)
 
 
 def test_damped_load_breakaway_at_a_low_rate_from_speed_and_angle():
@@ -187,7 +171,7 @@ def test_damped_load_breakaway_at_a_low_rate_from_speed_and_angle():
         theta = 0.4 + V * (u + tau * np.expm1(-u / tau)) + 0.5 * rise * u * u
         theta = np.round(theta / math.radians(0.01)) * math.radians(0.01)
         noise = 3e-4 * np.random.default_rng(int(ph * 100)).standard_normal(t.size)
-        b = ex.find_breakaway(t, speed + noise, theta=theta)
+        b = find_breakaway(t, speed + noise, theta=theta)
         errs.append(b.onset_time - t0)
     errs = np.array(errs)
     # where the first moving sample is still on the rise (u₁ < 2τ here), within a few ms (a line
@@ -212,7 +196,7 @@ def test_pressure_at_the_onset_follows_a_supply_ripple_and_skips_the_hold():
         onset = t[600 + int(np.argmax(p[600:700]))] + 0.004  # near a crest
         read = p + 300.0 * rng.standard_normal(t.size)
         truth = 40e5 + ramp * onset + 0.1e5 * np.sin(2 * np.pi * 6.0 * onset + phase)
-        errs.append(ex.value_at_onset(t, read, onset, 50) - truth)
+        errs.append(value_at_onset(t, read, onset, 50) - truth)
         sel = np.flatnonzero(t < onset)[-50:]
         long_errs.append(np.polyval(np.polyfit(t[sel] - onset, read[sel], 1), 0.0) - truth)
     assert np.sqrt(np.mean(np.square(errs))) < 0.25 * np.sqrt(np.mean(np.square(long_errs)))
@@ -220,4 +204,17 @@ def test_pressure_at_the_onset_follows_a_supply_ripple_and_skips_the_hold():
     # a hold, then a ramp starting 0.3 s before the onset, 25 readings a second
     t = np.arange(0.0, 4.0, 0.04)
     p = 30e5 + 10e5 * np.clip(t - 2.7, 0.0, None) + 1e3 * rng.standard_normal(t.size)
-    assert abs(ex.value_at_onset(t, p, 3.0, 50) - (30e5 + 10e5 * 0.3)) < 0.05e5
+    assert abs(value_at_onset(t, p, 3.0, 50) - (30e5 + 10e5 * 0.3)) < 0.05e5
+
+
+def test_hinge_costs_equal_nonnegative_least_squares():
+    from scipy.optimize import nnls
+
+    rng = np.random.default_rng(7)
+    t = np.linspace(0, 1, 40)
+    y = np.clip(t - 0.4, 0, None) * 3 + np.clip(t - 0.4, 0, None) ** 2 + 0.01 * rng.standard_normal(t.size)
+    y[5] = -0.5  # forces a bound to be active at some t0
+    grid = np.linspace(-0.1, 1.05, 60)
+    want = [nnls(np.column_stack([np.clip(t - g, 0, None), np.clip(t - g, 0, None) ** 2]), y)[1] ** 2
+            for g in grid]
+    np.testing.assert_allclose(_hinge_costs(t, y, grid), want, rtol=1e-9, atol=1e-12)

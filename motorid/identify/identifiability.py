@@ -1,0 +1,109 @@
+"""Which parameters the logs can determine: by the data each needs, and by the Jacobian's null space.
+
+Parameters the logs cannot determine are held fixed and reported as not
+identifiable, never given a number (MODEL.md, "What the bench can identify").
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+
+def _spread(x) -> float:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size < 2:
+        return 0.0
+    lo, hi = np.percentile(x, [2, 98])
+    return float((hi - lo) / max(np.max(np.abs(x)), 1e-300))
+
+
+def _has(arr) -> np.ndarray:
+    return np.isfinite(np.asarray(arr, dtype=float))
+
+
+def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
+    """Reasons why the logs cannot identify a parameter, from what data exist.
+
+    Returns name -> reason for parameters that lack the data they need
+    (MODEL.md, "What the bench can identify").
+    """
+    reasons = {}
+    s = data.running
+    m = data.measured
+    n_run = 0 if s is None else int(np.asarray(s.theta).size)
+    tq = _has(m["torque"]) if n_run else np.zeros(0, bool)
+    psum = np.asarray(s.p_a + s.p_b) if n_run else np.zeros(0)
+    if tq.sum() < 3:
+        for k in ("Kv", "KF", "TFc"):
+            reasons[k] = "no running-torque samples in these logs"
+    else:
+        mu_w = np.asarray(s.viscosity * s.speed)[tq]
+        if _spread(np.abs(mu_w)) < 0.05:
+            reasons["Kv"] = "running torque at a single speed·viscosity level: viscous and Coulomb friction cannot be told apart"
+        if _spread(psum[tq]) < 0.05:
+            msg = "running torque at a single port-pressure sum P_A+P_B: K_F and T_Fc cannot be told apart"
+            reasons["KF"] = msg
+            reasons["TFc"] = msg
+    n_ev = 0 if data.events is None else int(np.asarray(data.held_torque).size)
+    good_ev = _has(data.held_torque) if n_ev else np.zeros(0, bool)
+    if good_ev.sum() == 0:
+        why = ("no startability breakaway found in these logs (ISO 4392-2 runs needed)" if n_ev == 0 else
+               f"{n_ev} breakaway(s) found, but no torque reading while the shaft was held")
+        for k in ("KFS", "Ks"):
+            reasons[k] = why
+    elif good_ev.sum() < 3 or _spread(np.asarray(data.events.p_a + data.events.p_b)[good_ev]) < 0.05:
+        msg = "breakaway at a single port-pressure level: K_FS and K_s cannot be told apart"
+        reasons["KFS"] = msg
+        reasons["Ks"] = msg
+    for k in ("KFS", "Ks"):
+        if k not in reasons and ("KF" in reasons or "TFc" in reasons):
+            reasons[k] = "static friction is measured relative to K_F and T_Fc, which these logs do not determine"
+    flows = {c: _has(m[c]) if n_run else np.zeros(0, bool) for c in ("q_a", "q_b", "q_case")}
+    case_info = flows["q_case"] | (flows["q_a"] & flows["q_b"])
+    if case_info.sum() < 3:
+        reasons["KL0"] = "no case-drain flow (nor both port flows) in these logs"
+    else:
+        pitch = 2 * np.pi / spec.pistons
+        phase = np.mod(np.asarray(s.theta)[case_info], pitch) / pitch
+        bins = np.unique(np.floor(phase * 12).astype(int))
+        for name in names:
+            if name.startswith("KL_") and len(bins) < 8:
+                reasons[name] = "case-drain flow not seen over a whole piston pitch of shaft angle (a slow constant-speed run is needed)"
+    port = flows["q_a"] | flows["q_b"]
+    if port.sum() < 3:
+        reasons["KAB"] = "no port flow in these logs"
+    elif np.all(np.abs(np.asarray(s.p_a - s.p_b)[port]) < 1e3):
+        reasons["KAB"] = "port flows only at zero pressure difference"
+    if "KL0" in reasons:
+        for name in names:
+            if name.startswith("KL_"):
+                reasons.setdefault(name, reasons["KL0"])
+    return {k: v for k, v in reasons.items() if k in names}
+
+
+def null_space_reasons(JtJ: np.ndarray, free: list, tol: float) -> dict:
+    """Parameters in directions the weighted Jacobian cannot see (relative
+    singular value below ``tol``, from the eigenvalues of the normal matrix)."""
+    norms = np.sqrt(np.clip(np.diag(JtJ), 0, None))
+    out = {}
+    for i, k in enumerate(free):
+        if norms[i] == 0 or not np.isfinite(norms[i]):
+            out[k] = "the fitted channels do not depend on it in these logs"
+    cols = np.where((norms > 0) & np.isfinite(norms))[0]
+    if cols.size == 0:
+        return out
+    Jn = JtJ[np.ix_(cols, cols)] / np.outer(norms[cols], norms[cols])
+    w, v = np.linalg.eigh(Jn)
+    s = np.sqrt(np.clip(w, 0, None))
+    weak = np.where(s < tol * s.max())[0]
+    vt = v.T
+    for j in weak:
+        involved = [free[cols[i]] for i in np.where(np.abs(vt[j]) > 0.2)[0]]
+        for k in involved:
+            others = [o for o in involved if o != k]
+            out.setdefault(k, "cannot be told apart from " + ", ".join(others) + " with these logs"
+                           if others else "the logs do not determine it")
+    return out

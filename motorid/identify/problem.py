@@ -1,0 +1,235 @@
+"""The residual core of the fit: the data reduced to cells, and the weighted residual over them.
+
+Least squares, Bayes, the exact compression and the experiment planner all
+evaluate the same thing: the model (:func:`motorid.model.predict`,
+:func:`~motorid.model.predict_breakaway`) at the cells or events of a
+:class:`Problem`, each channel's residual weighted by its noise level.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from motorid import model
+from motorid._aot import cached_jit
+from motorid.identify.types import CHANNELS, RUNNING_CHANNELS
+from motorid.model import Samples
+
+
+class Ctx(NamedTuple):
+    """Everything the residual needs; arrays are traced, the rest is static."""
+
+    spec: object
+    mechanisms: tuple
+    free: tuple
+    positive: tuple
+    scales: jax.Array
+    held: dict
+    running: object
+    events: object
+    observed: dict
+    weights: dict
+
+
+def _params(values: dict, ctx: Ctx) -> dict:
+    p = dict(ctx.held)
+    p.update(values)
+    return p
+
+
+def predictions(values: dict, ctx: Ctx) -> dict:
+    p = _params(values, ctx)
+    out = {}
+    if ctx.running is not None:
+        ch = model.predict(p, ctx.spec, ctx.running, ctx.mechanisms)
+        out.update(torque=ch.torque, q_a=ch.q_a, q_b=ch.q_b, q_case=ch.q_case)
+    if ctx.events is not None:
+        out["breakaway"] = model.predict_breakaway(p, ctx.spec, ctx.events, ctx.mechanisms)
+    return out
+
+
+def weighted_residual(values: dict, ctx: Ctx):
+    pred = predictions(values, ctx)
+    return jnp.concatenate([(ctx.observed[c] - pred[c]) * ctx.weights[c] for c in CHANNELS if c in ctx.observed])
+
+
+def from_unconstrained(y, ctx: Ctx) -> dict:
+    v = model.constrain(y, np.array(ctx.positive, dtype=bool), ctx.scales)
+    return {k: v[i] for i, k in enumerate(ctx.free)}
+
+
+def to_unconstrained(values: dict, ctx: Ctx):
+    v = jnp.stack([jnp.asarray(values[k], dtype=jnp.float64) for k in ctx.free])
+    return model.unconstrain(v, np.array(ctx.positive, dtype=bool), ctx.scales)
+
+
+def residual_unconstrained(y, ctx: Ctx):
+    return weighted_residual(from_unconstrained(y, ctx), ctx)
+
+
+residual_jit = cached_jit(weighted_residual)
+
+
+@cached_jit
+def normal_equations(values: dict, ctx: Ctx):
+    """JᵀJ, Jᵀr and rᵀr of the weighted residual over the free parameters (in
+    the order of ``ctx.free``): the sufficient statistics of a Gauss-Newton step,
+    computed where the data are, so that no tall matrix leaves the device."""
+    r = weighted_residual(values, ctx)
+    jac = jax.jacfwd(weighted_residual)(values, ctx)
+    J = jnp.stack([jac[k] for k in ctx.free], axis=1)
+    return J.T @ J, J.T @ r, r @ r
+predictions_jit = cached_jit(predictions)
+
+
+def as_arrays(values: dict) -> dict:
+    """Parameter values as float64 arrays (NumPy: a jitted call takes them without a JAX dispatch)."""
+    return {k: np.asarray(v, dtype=np.float64) for k, v in values.items()}
+
+
+def bucket(n: int, minimum: int = 64) -> int:
+    """Padded array length: the next power of two (so that campaigns of similar
+    size share compiled functions instead of recompiling for every length)."""
+    return max(minimum, 1 << max(int(n) - 1, 0).bit_length())
+
+
+_PAD = {"viscosity": 1.0, "temperature": 40.0}
+
+
+def pad_samples(s: Samples, size: int) -> Samples:
+    """Samples padded to ``size`` with harmless values (weights there are zero)."""
+    n = int(np.asarray(s.theta).size)
+    return Samples(*[
+        np.concatenate([np.asarray(f, dtype=np.float64), np.full(size - n, _PAD.get(name, 0.0))])
+        for name, f in zip(Samples._fields, s)
+    ])
+
+
+def pad(x, size: int, value: float = 0.0):
+    x = np.asarray(x, dtype=float)
+    return np.concatenate([x, np.full(size - x.size, value)])
+
+
+class Problem:
+    """The data of a fit, per sample and reduced to cells for the optimizer.
+
+    The optimizer sees cell means: samples of one run that share a shaft-angle
+    bin (``bins_per_pitch`` per piston pitch, over the whole revolution so that
+    shaft-order effects survive).  Inside a steady run speed, pressures and
+    viscosity hardly change, so the model of the cell mean is the mean of the
+    model; the parameter-free S(θ) is averaged exactly, and the viscosity as its
+    harmonic mean (the leakage goes as 1/μ).  The fit then costs the same for
+    10 k or 3 M rows of the same runs.
+    """
+
+    def __init__(self, data, spec, free, held, mechanisms, bins_per_pitch=48):
+        self.data, self.spec, self.free, self.held = data, spec, list(free), dict(held)
+        self.mechanisms = tuple(mechanisms)
+        self.has_running = data.running is not None and int(np.asarray(data.running.theta).size) > 0
+        self.has_events = data.events is not None and int(np.asarray(data.held_torque).size) > 0
+        self.measured = {c: np.asarray(data.measured[c], dtype=float) for c in RUNNING_CHANNELS} if self.has_running else {}
+        self.held_torque = np.asarray(data.held_torque, dtype=float) if self.has_events else np.zeros(0)
+        self.run_of = np.asarray(data.run_of_sample, dtype=int) if self.has_running else np.zeros(0, int)
+        self.n_samples, self.n_cells = 0, 0
+        if self.has_running:
+            bins = bins_per_pitch * spec.pistons
+            theta = np.mod(np.asarray(data.running.theta), 2 * np.pi)
+            b = np.minimum((theta / (2 * np.pi) * bins).astype(np.int64), bins - 1)
+            key = self.run_of.astype(np.int64) * bins + b
+            # cells numbered in key order: a counting pass instead of a sort
+            occupied = np.bincount(key, minlength=int(key.max()) + 1) > 0
+            self.cell_of = (np.cumsum(occupied) - 1)[key]
+            self.n_cells = int(occupied.sum())
+            counts = np.bincount(self.cell_of, minlength=self.n_cells).astype(float)
+            self.cell_run = np.zeros(self.n_cells, int)
+            self.cell_run[self.cell_of] = self.run_of
+            self.cell_size = bucket(self.n_cells)
+            # cell means; θ wrapped first (a bin never straddles the wrap), so that
+            # samples of one bin from different revolutions average to that bin
+            fields = data.running._replace(theta=theta)
+            means = Samples(*[
+                np.bincount(self.cell_of, weights=np.asarray(f, dtype=float), minlength=self.n_cells) / counts
+                for f in fields
+            ])
+            # the leakage flows go as 1/μ: the cell's viscosity is the harmonic mean of its
+            # samples', so that the cell's leakage is their mean leakage (Jensen: the plain
+            # mean would make the model's leakage too small by var(μ)/μ² and bias K_L, K_AB up;
+            # on the demo campaign by 8.6·10⁻⁶, a quarter of K_L0's standard error).  The viscous
+            # torque, ∝ μ, then sees the harmonic mean: off by the same var(μ)/μ² of its size,
+            # a thousandth of K_v's standard error there
+            with np.errstate(divide="ignore", invalid="ignore"):
+                inv = np.bincount(self.cell_of, weights=1.0 / np.asarray(data.running.viscosity, dtype=float),
+                                  minlength=self.n_cells) / counts
+                means = means._replace(viscosity=np.where(inv > 0, 1.0 / inv, means.viscosity))
+            self.cell_samples = pad_samples(means, self.cell_size)
+            self.n_samples = int(self.run_of.size)
+            self.running_padded = pad_samples(data.running, bucket(self.n_samples))
+        if self.has_events:
+            self.n_events = int(self.held_torque.size)
+            self.events_padded = pad_samples(data.events, bucket(self.n_events, 16))
+        self.cells = None  # (observed, weights) per channel over the cells: set_cells
+        self.cells_version = 0  # counts set_cells calls (a compression of older cells is stale)
+        # the exact quadratic expansion of the cell predictions over the free parameters
+        # named by expansion_key (None: not built, or the model is not quadratic), and the
+        # compressed backend of the current cells (motorid.identify.solver.backend)
+        self.expansion, self.expansion_key, self.compressed = None, None, None
+
+    def n_real(self, channel: str) -> int:
+        """How many of a channel's (padded) cells or events are real."""
+        return getattr(self, "n_events", 0) if channel == "breakaway" else self.n_cells
+
+    def observed(self):
+        out = dict(self.measured)
+        if self.has_events:
+            out["breakaway"] = self.held_torque
+        return out
+
+    def set_cells(self, inliers: dict, sigma_runs: dict, sigma_breakaway):
+        """Cell means of each channel over its inlier samples, and their weights."""
+        obs, w = {}, {}
+        for c in RUNNING_CHANNELS if self.has_running else ():
+            ok = inliers[c]
+            y = np.where(ok, self.measured[c], 0.0)
+            cnt = np.bincount(self.cell_of, weights=ok.astype(float), minlength=self.n_cells)
+            tot = np.bincount(self.cell_of, weights=y, minlength=self.n_cells)
+            obs[c] = pad(np.where(cnt > 0, tot / np.maximum(cnt, 1), 0.0), self.cell_size)
+            w[c] = pad(np.sqrt(cnt) / sigma_runs[c][self.cell_run], self.cell_size)
+        if self.has_events:
+            ok = inliers["breakaway"]
+            size = int(np.asarray(self.events_padded.theta).size)
+            obs["breakaway"] = pad(np.where(ok, self.held_torque, 0.0), size)
+            w["breakaway"] = pad(np.where(ok, 1.0 / np.broadcast_to(sigma_breakaway, ok.shape), 0.0), size)
+        self.cells = (obs, w)
+        self.cells_version += 1
+
+    def ctx(self, scales=None) -> Ctx:
+        free = tuple(self.free)
+        if scales is None:
+            scales = np.ones(len(free))
+        positive = tuple(bool(model.parameter_info(k, self.mechanisms).positive) for k in free)
+        obs, w = self.cells
+        return Ctx(
+            spec=self.spec, mechanisms=self.mechanisms, free=free, positive=positive,
+            scales=np.asarray(scales, dtype=np.float64),
+            held={k: np.asarray(v, dtype=np.float64) for k, v in self.held.items()},
+            running=self.cell_samples if self.has_running else None,
+            events=self.events_padded if self.has_events else None,
+            observed=obs, weights=w,
+        )
+
+    def predictions(self, values: dict) -> dict:
+        """Per-sample predictions of every channel (not the cells)."""
+        ctx = Ctx(
+            spec=self.spec, mechanisms=self.mechanisms, free=tuple(self.free), positive=(),
+            scales=np.zeros(0), held={k: np.asarray(v, dtype=np.float64) for k, v in self.held.items()},
+            running=self.running_padded if self.has_running else None,
+            events=self.events_padded if self.has_events else None, observed={}, weights={},
+        )
+        out = predictions_jit(as_arrays(values), ctx)
+        n = {c: self.n_samples for c in RUNNING_CHANNELS}
+        n["breakaway"] = getattr(self, "n_events", 0)
+        return {c: np.asarray(v)[: n[c]] for c, v in out.items()}

@@ -1,0 +1,282 @@
+"""The solvers of the fit: Gauss-Newton start, then Levenberg-Marquardt (optimistix).
+
+Two backends see the same problem: the full residual through the JAX model
+(:class:`FullBackend`), and its exact compression where the model is quadratic
+in the free parameters (:class:`CompressedBackend`, :mod:`motorid.identify.compress`).
+Both solve in unconstrained coordinates (log for the positive parameters, scaled).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from motorid import model
+from motorid._aot import cached_jit
+from motorid.identify.compress import Expansion
+from motorid.identify.identifiability import null_space_reasons
+from motorid.identify.problem import (Ctx, Problem, as_arrays, from_unconstrained, normal_equations, residual_jit,
+                                      residual_unconstrained, to_unconstrained)
+from motorid.identify.types import FitOptions
+
+
+def parameter_scales(values: dict, free: list, mechanisms) -> np.ndarray:
+    """Working scale of each free parameter: its current size, or its typical one at 0."""
+    return np.array([abs(values[k]) or model.parameter_info(k, mechanisms).typical for k in free])
+
+
+_SOLVER = []
+
+
+def _optimistix():
+    """(optimistix, the damped normal-equation solver), imported when a solver is first
+    traced: a run whose compiled solvers come from disk (motorid._aot) never pays
+    the import of optimistix, lineax and equinox."""
+    import optimistix
+
+    if not _SOLVER:
+        _SOLVER.append(_dense_cholesky_solver())
+    return optimistix, _SOLVER[0]
+
+
+def cholesky(A):
+    """Lower Cholesky factor of a small SPD matrix in plain XLA operations [same units]."""
+    n = A.shape[0]
+    idx = jnp.arange(n)
+
+    def column(j, L):
+        s = A[:, j] - L @ L[j, :]  # columns ≥ j of L are still zero
+        d = jnp.sqrt(jnp.maximum(s[j], jnp.finfo(A.dtype).tiny))
+        return L.at[:, j].set(jnp.where(idx >= j, s / d, 0.0))
+
+    return jax.lax.fori_loop(0, n, column, jnp.zeros_like(A))
+
+
+def cholesky_solve(L, b):
+    """x with L Lᵀ x = b: forward then backward substitution."""
+    n = b.shape[0]
+    y = jax.lax.fori_loop(0, n, lambda i, y: y.at[i].set((b[i] - L[i, :] @ y) / L[i, i]), jnp.zeros_like(b))
+
+    def back(k, x):
+        i = n - 1 - k
+        return x.at[i].set((y[i] - L[:, i] @ x) / L[i, i])
+
+    return jax.lax.fori_loop(0, n, back, jnp.zeros_like(b))
+
+
+def _dense_cholesky_solver():
+    """lineax ``Normal(Cholesky)`` for the damped system of Levenberg-Marquardt, whose
+    matrix is parameters × parameters: factorized in plain XLA operations, not by
+    LAPACK, so that a compiled solver loads without importing scipy.linalg."""
+    import jax.flatten_util as jfu
+    import lineax as lx
+
+    class DenseCholesky(lx.AbstractLinearSolver):
+        def init(self, operator, options):
+            return cholesky(operator.as_matrix())
+
+        def compute(self, state, vector, options):
+            flat, unflatten = jfu.ravel_pytree(vector)
+            return unflatten(cholesky_solve(state, flat)), lx.RESULTS.successful, {}
+
+        def transpose(self, state, options):
+            return state, options  # symmetric
+
+        def conj(self, state, options):
+            return state, options  # real
+
+        def assume_full_rank(self):
+            return True
+
+    return lx.Normal(DenseCholesky())
+
+
+def _run_levenberg_marquardt(residual, y0, args, rtol, atol, max_steps):
+    """Optimistix LM → (y, steps, converged), arrays only (so the program can be kept on disk)."""
+    # normal equations with Cholesky: the damped system is parameters × parameters,
+    # eight times faster than QR of a tall Jacobian; float64 and the log/scale
+    # transform keep its condition number harmless
+    optx, linear_solver = _optimistix()
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
+    sol = optx.least_squares(residual, solver, y0, args=args, max_steps=max_steps, throw=False)
+    return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+
+
+@cached_jit
+def _levenberg_marquardt(y0, ctx: Ctx, rtol, atol, max_steps):
+    """Optimistix LM on the full residual → (y, steps, converged)."""
+    return _run_levenberg_marquardt(residual_unconstrained, y0, ctx, rtol, atol, max_steps)
+
+
+class FullBackend:
+    """The optimizer's view of the problem: every cell, through the JAX model."""
+
+    def __init__(self, problem: Problem):
+        self.problem = problem
+
+    def normal(self, values: dict):
+        JtJ, Jtr, rr = normal_equations(as_arrays(values), self.problem.ctx())
+        return np.asarray(JtJ), np.asarray(Jtr), float(rr)
+
+    def chi2(self, values: dict, ctx=None) -> float:
+        return float(jnp.sum(residual_jit(as_arrays(values), ctx or self.problem.ctx()) ** 2))
+
+    def levenberg_marquardt(self, values: dict, free: list, opt: FitOptions):
+        mechs = self.problem.mechanisms
+        scales = parameter_scales(values, free, mechs)
+        ctx = self.problem.ctx(scales)
+        y0 = to_unconstrained(as_arrays(values), ctx)
+        y, steps, ok = _levenberg_marquardt(y0, ctx, opt.rtol, opt.atol, opt.max_steps)
+        new = {k: float(v) for k, v in from_unconstrained(y, ctx).items()}
+        return new, int(steps), bool(ok)
+
+
+class CompressedCtx(NamedTuple):
+    R0: jax.Array
+    R1: jax.Array
+    p0: jax.Array
+    a: jax.Array
+    b: jax.Array
+    half: jax.Array
+    positive: tuple
+    scales: jax.Array
+
+
+def _compressed_residual(y, c: CompressedCtx):
+    d = model.constrain(y, np.array(c.positive, dtype=bool), c.scales) - c.p0
+    return c.R0 - c.R1 @ jnp.concatenate([d, d[c.a] * d[c.b] * c.half])
+
+
+@cached_jit
+def _levenberg_marquardt_compressed(y0, c: CompressedCtx, rtol, atol, max_steps):
+    """Optimistix LM on the compressed residual → (y, steps, converged)."""
+    return _run_levenberg_marquardt(_compressed_residual, y0, c, rtol, atol, max_steps)
+
+
+class CompressedBackend:
+    """The same problem through its exact compression (:mod:`motorid.identify.compress`)."""
+
+    def __init__(self, problem: Problem, expansion):
+        self.problem, self.exp = problem, expansion
+        self.R0, self.R1 = expansion.compress(*problem.cells)
+        self.p = len(expansion.names)
+
+    def _delta(self, values):
+        return np.array([values[k] for k in self.exp.names]) - self.exp.p0
+
+    def residual(self, values):
+        d = self._delta(values)
+        return self.R0 - self.R1 @ np.concatenate([d, self.exp.products(d)])
+
+    def jacobian(self, values):
+        d = self._delta(values)
+        du = np.zeros((len(self.exp.pairs), self.p))
+        for k, (a, b) in enumerate(self.exp.pairs):
+            du[k, a] += self.exp.half[k] * d[b]
+            du[k, b] += self.exp.half[k] * d[a]
+        return -(self.R1[:, : self.p] + self.R1[:, self.p:] @ du)
+
+    def normal(self, values: dict):
+        with np.errstate(over="ignore", invalid="ignore"):  # a wild trial point: the caller checks finiteness
+            J, r = self.jacobian(values), self.residual(values)
+            return J.T @ J, J.T @ r, float(r @ r)
+
+    def chi2(self, values: dict, ctx=None) -> float:
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = self.residual(values)
+            return float(r @ r)
+
+    def levenberg_marquardt(self, values: dict, free: list, opt: FitOptions):
+        mechs = self.problem.mechanisms
+        scales = parameter_scales(values, free, mechs)
+        positive = tuple(bool(model.parameter_info(k, mechs).positive) for k in free)
+        c = CompressedCtx(np.asarray(self.R0), np.asarray(self.R1), np.asarray(self.exp.p0),
+                           np.asarray(self.exp.a), np.asarray(self.exp.b), np.asarray(self.exp.half),
+                           positive, np.asarray(scales, dtype=np.float64))
+        pos = np.array(positive)
+        y0 = model.unconstrain(np.array([values[k] for k in free], dtype=float), pos, c.scales, xp=np)
+        y, steps, ok = _levenberg_marquardt_compressed(y0, c, opt.rtol, opt.atol, opt.max_steps)
+        p = model.constrain(np.asarray(y), pos, c.scales, xp=np)
+        new = {k: float(p[i]) for i, k in enumerate(free)}
+        return new, int(steps), bool(ok)
+
+
+def backend_for(problem: Problem, values: dict, free: list, opt: FitOptions):
+    """The compressed problem where the model is quadratic in the free parameters, else the full one."""
+    if opt.compress and free:
+        key = tuple(free)
+        if problem.expansion_key != key:
+            problem.expansion = Expansion.build(problem, values, list(free))
+            problem.expansion_key = key
+        if problem.expansion is not None:
+            cached = problem.compressed
+            if cached is None or cached[0] != (key, problem.cells_version):
+                problem.compressed = ((key, problem.cells_version), CompressedBackend(problem, problem.expansion))
+            return problem.compressed[1]
+    return FullBackend(problem)
+
+
+def gauss_newton_start(problem: Problem, values: dict, free: list, reasons: dict, opt: FitOptions):
+    """A few Gauss-Newton steps in natural (scaled) coordinates: the base model is linear in
+    most parameters, so they land next to the optimum from any start.  Directions the
+    weighted Jacobian cannot see are found on the way (:func:`null_space_reasons`): their
+    parameters are held (``problem.held``, ``reasons`` updated) → (values, free)."""
+    mechs = problem.mechanisms
+    for _ in range(8):
+        backend = backend_for(problem, values, free, opt)
+        JtJ, Jtr, _ = backend.normal(values)
+        scales = parameter_scales(values, free, mechs)
+        with np.errstate(over="ignore", invalid="ignore"):
+            JtJ, Jtr = JtJ * np.outer(scales, scales), Jtr * scales
+        if not (np.all(np.isfinite(JtJ)) and np.all(np.isfinite(Jtr))):
+            break  # leave a point this wild to Levenberg-Marquardt
+        bad = null_space_reasons(JtJ, free, opt.null_space_tol)
+        if bad:
+            for k, why in bad.items():
+                reasons[k] = why
+                problem.held[k] = values.pop(k)
+            free = [k for k in free if k not in bad]
+            problem.free = free
+            if not free:
+                break
+            continue
+        norms = np.sqrt(np.diag(JtJ))
+        with np.errstate(all="ignore"):
+            step = -np.linalg.solve(JtJ / np.outer(norms, norms), Jtr / norms) / norms
+        trial = dict(values)
+        for i, k in enumerate(free):
+            new = values[k] + step[i] * scales[i]
+            if model.parameter_info(k, mechs).positive and values[k] > 0:
+                # a positive parameter may shrink at most fivefold a step: a
+                # nonlinear one (a characteristic speed) must not jump to 0
+                new = max(new, 0.2 * values[k])
+            trial[k] = new
+        before, after = backend.chi2(values), backend.chi2(trial)
+        if not np.all(np.isfinite(step)) or not np.isfinite(after) or after > before:
+            break  # Gauss-Newton does not improve here: leave the rest to Levenberg-Marquardt
+        values = trial
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    for k in free:
+        info = model.parameter_info(k, mechs)
+        if info.positive and values[k] <= 0:
+            values[k] = 1e-3 * info.typical
+    return values, free
+
+
+def solve(problem: Problem, values: dict, free: list, reasons: dict, opt: FitOptions, first: bool):
+    """Gauss-Newton start (first round), null-space check, then Levenberg-Marquardt
+    → (values, steps, converged, free, reasons)."""
+    values = dict(values)
+    if first and free:
+        values, free = gauss_newton_start(problem, values, free, reasons, opt)
+    if not free:
+        return values, 0, True, free, reasons
+    backend = backend_for(problem, values, free, opt)
+    new, steps, ok = backend.levenberg_marquardt(values, free, opt)
+    if backend.chi2(new) <= backend.chi2(values) * (1 + 1e-12):
+        values = new
+    return values, steps, ok, free, reasons

@@ -1,0 +1,84 @@
+"""motorid._aot: compiled programs kept on disk give the same numbers as plain JAX."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+
+
+SCRIPT = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from motorid._aot import cached_jit
+
+    TRACES = []
+
+    def f(x, scale, names):
+        TRACES.append(1)  # runs only while JAX traces
+        return {n: x * scale * (i + 1) for i, n in enumerate(names)}
+
+    g = cached_jit(f)
+    out = g(np.arange(4.0), 2.0, ("a", "b"))
+    print(len(TRACES), float(out["b"][3]))
+""")
+
+
+def _run(script, cache):
+    env = {**os.environ, "MOTORID_CACHE_DIR": str(cache)}
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout.split()
+
+
+def test_compiled_program_is_kept_on_disk_and_reloaded(tmp_path):
+    script = tmp_path / "prog.py"
+    script.write_text(SCRIPT)
+    cache = tmp_path / "cache"
+    assert _run(script, cache) == ["1", "12.0"]  # traced and compiled
+    files = list((cache / "aot").rglob("f-*.bin"))
+    assert len(files) == 1
+    assert _run(script, cache) == ["0", "12.0"]  # loaded: no trace at all
+    files[0].write_bytes(b"not an executable")  # a broken file is replaced, the answer is right
+    assert _run(script, cache) == ["1", "12.0"]
+    assert _run(script, cache) == ["0", "12.0"]
+
+
+def test_cached_jit_matches_plain_jax_and_keys_on_static_values(tmp_path):
+    import jax
+
+    from motorid._aot import cached_jit
+
+    def f(x, k, names):
+        return {n: jax.numpy.sin(x) * k for n in names}
+
+    g = cached_jit(f)
+    x = np.linspace(0, 1, 5)
+    for k in (1.0, 3.0):  # a static float is part of the key: a new value, a new program
+        got = g(x, k, ("a",))
+        np.testing.assert_allclose(np.asarray(got["a"]), np.sin(x) * k, rtol=1e-15)
+    assert len(g._memory) == 2
+    g(np.linspace(0, 1, 7), 1.0, ("a",))  # a new shape, a new program
+    assert len(g._memory) == 3
+
+
+def test_static_object_of_a_foreign_class_is_not_kept_on_disk(tmp_path, monkeypatch):
+    from motorid import _aot
+
+    class Setting:  # a user's class: its code is not in motorid's fingerprint
+        def __repr__(self):
+            return "<setting>"
+
+    monkeypatch.setattr(_aot._jaxconfig, "CACHE_DIR", str(tmp_path))
+
+    def f(x, setting):
+        return x * 2.0
+
+    g = _aot.cached_jit(f)
+    np.testing.assert_allclose(np.asarray(g(np.ones(3), Setting())), 2.0)
+    assert not list(tmp_path.rglob("*.bin"))
+    g(np.ones(3), "plain text")  # a plain static value: kept
+    assert len(list(tmp_path.rglob("f-*.bin"))) == 1
+
+

@@ -1,0 +1,112 @@
+"""motorid.identify.acceleration: the speed's derivative, with a shaft-locked ripple resolved even when aliased."""
+
+import numpy as np
+import pytest
+
+from motorid.identify.acceleration import aliased_cycles, running_acceleration, smoothed_acceleration
+
+
+@pytest.mark.parametrize("jitter", [0.0, 2e-4])
+def test_even_sampling_derivative_equals_the_local_fit(jitter):
+    rng = np.random.default_rng(8)
+    t = np.arange(300) * 0.01 + 5.0
+    t = t + jitter * 0.01 * rng.uniform(-1, 1, t.size)  # time stamps rounded to a few digits
+    w = np.sin(3 * t) + 0.01 * rng.standard_normal(t.size)
+    fast = smoothed_acceleration(t, w)
+    # the general path: every window's own quadratic (what uneven sampling gets)
+    k, n = 9, t.size
+    first = np.clip(np.arange(n) - k // 2, 0, n - k)
+    slow = np.empty(n)
+    for i in range(n):
+        sl = slice(first[i], first[i] + k)
+        slow[i] = np.polyfit(t[sl] - t[i], w[sl], 2)[1]
+    tol = 1e-9 if jitter == 0 else 0.02
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=tol * np.max(np.abs(slow)))
+
+
+def test_smoothed_acceleration_follows_a_known_derivative():
+    t = np.arange(0.0, 2.0, 0.002)
+    w = 3.0 + 2.0 * t ** 2
+    np.testing.assert_allclose(smoothed_acceleration(t, w)[5:-5], 4.0 * t[5:-5], rtol=1e-6, atol=1e-6)
+    jittered = np.sort(t + np.random.default_rng(0).uniform(0, 0.0015, t.size))
+    acc = smoothed_acceleration(jittered, 3.0 + 2.0 * jittered ** 2)
+    np.testing.assert_allclose(acc[5:-5], 4.0 * jittered[5:-5], atol=0.05)
+    assert np.all(smoothed_acceleration(t[:3], w[:3]) == 0.0)
+
+
+def test_shaft_locked_speed_ripple_gives_its_true_acceleration_even_when_aliased():
+    """2500 rpm sampled at 50 Hz: a once-per-revolution speed wobble aliases; its
+    acceleration comes from θ, the plain derivative of sampled speed is wrong."""
+    rng = np.random.default_rng(11)
+    w0, amp, rate = 2500 * 2 * np.pi / 60, 0.4, 50.0
+    t = np.arange(400) / rate
+    theta = w0 * t + 0.3  # the wobble hardly moves θ: first order is enough for the truth
+    speed = w0 + amp * np.cos(theta) + 0.002 * rng.standard_normal(t.size)
+    true_acc = -amp * np.sin(theta) * w0
+    steady = np.ones(t.size, bool)
+    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), steady)
+    plain = smoothed_acceleration(t, speed)
+    inner = slice(5, -5)
+    assert np.sqrt(np.mean((got - true_acc)[inner] ** 2)) < 0.02 * np.sqrt(np.mean(true_acc**2))
+    assert np.sqrt(np.mean((plain - true_acc)[inner] ** 2)) > 0.5 * np.sqrt(np.mean(true_acc**2))
+    # no ripple: the same as the plain derivative up to the fitted noise
+    flat = w0 + 0.002 * rng.standard_normal(t.size)
+    a = running_acceleration(t, flat, np.mod(theta, 2 * np.pi), steady)
+    assert np.max(np.abs(a - smoothed_acceleration(t, flat))) < 0.05 * w0 * 0.002 * 10
+    # less than two revolutions: the plain derivative
+    assert np.array_equal(running_acceleration(t[:40], speed[:40], np.full(40, 0.1), steady[:40]),
+                          smoothed_acceleration(t[:40], speed[:40]))
+
+
+def test_shaft_ripple_where_two_orders_alias_onto_one_frequency():
+    """1000 rpm at 50 Hz: θ steps 120° a sample, so cos 2θ and cos θ read alike; the
+    first order is kept and the second, folded onto it, left out (the fit of both is
+    singular; it used to fall back to the plain derivative, off by the whole ripple)."""
+    rng = np.random.default_rng(2)
+    w0, amp, rate = 1000 * 2 * np.pi / 60, 0.3, 50.0
+    t = np.arange(300) / rate
+    theta = w0 * t + 0.4
+    speed = w0 + amp * np.cos(theta) + 0.005 * rng.standard_normal(t.size)
+    true_acc = -amp * np.sin(theta) * w0
+    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
+    rms = np.sqrt(np.mean(true_acc**2))
+    inner = slice(5, -5)
+    assert np.sqrt(np.mean((got - true_acc)[inner] ** 2)) < 0.05 * rms
+    assert np.sqrt(np.mean((smoothed_acceleration(t, speed) - true_acc)[inner] ** 2)) > 0.5 * rms
+
+
+def test_shaft_ripple_is_resolved_under_a_slow_speed_wander():
+    """A dynamometer's speed controller wanders slowly (here 2 Hz, three times the ripple's
+    amplitude): what the trend leaves of it raises the misfit, and the ripple, though
+    plainly there, no longer passed a strict F test (F ≈ 20 here against 30); it must be kept."""
+    rng = np.random.default_rng(4)
+    w0, amp, rate = 2500 * 2 * np.pi / 60, 0.2, 50.0
+    t = np.arange(100) / rate
+    theta = w0 * t + 1.1
+    wander = 0.6 * np.sin(2 * np.pi * 2.0 * t + 0.5) + 0.1 * rng.standard_normal(t.size).cumsum() / 3
+    speed = w0 + wander + amp * np.cos(theta) + 0.13 * rng.standard_normal(t.size)
+    ripple_acc = -amp * np.sin(theta) * w0
+    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
+    plain = smoothed_acceleration(t, speed)
+    inner = slice(5, -5)
+    # what is left is the wander's own slow acceleration and the noise, not the ripple
+    err = np.sqrt(np.mean((got - ripple_acc - smoothed_acceleration(t, w0 + wander))[inner] ** 2))
+    err_plain = np.sqrt(np.mean((plain - ripple_acc - smoothed_acceleration(t, w0 + wander))[inner] ** 2))
+    assert err < 0.35 * np.sqrt(np.mean(ripple_acc**2)) < err_plain
+
+
+def test_shaft_order_sampled_in_step_is_left_to_the_trend():
+    """1500 rpm at 50 Hz: the shaft turns half a revolution a sample, so order 2 reads as a
+    constant (and order 1 sits on the Nyquist frequency).  Neither may be fitted: a
+    'ripple' at order 2 fitted to the trend's leftovers came back as a constant false
+    acceleration, 2ω times its size."""
+    rng = np.random.default_rng(6)
+    w0, rate = 1500 * 2 * np.pi / 60, 50.0
+    t = np.arange(400) / rate
+    wander = 0.3 * np.sin(2 * np.pi * 0.37 * t) + 0.2 * np.sin(2 * np.pi * 1.3 * t + 1.0)
+    speed = w0 + wander + 0.02 * rng.standard_normal(t.size)
+    theta = w0 * t + 0.2 + np.cumsum(wander) / rate
+    cycles = aliased_cycles(t, speed, (1, 2))
+    assert cycles[2] < 1.0 and abs(cycles[1] - 200.0) < 1.0
+    got = running_acceleration(t, speed, np.mod(theta, 2 * np.pi), np.ones(t.size, bool))
+    np.testing.assert_array_equal(got, smoothed_acceleration(t, speed))
