@@ -60,7 +60,8 @@ def _record_result(fleet_dir: Path, camp, options: dict, out: dict) -> None:
     _forget(fleet_dir, name, keep_failed=False)
     task = {"campaign": name, "folder": camp.folder, "serial": camp.serial, "date": camp.date.isoformat(),
             "bench": camp.bench, "motor_type": camp.motor_type, "key": out["key"], "options": options,
-            "motorid_version": __version__, "input_hashes": camp.hashes, "seconds": out["seconds"]}
+            "motorid_version": __version__, "input_hashes": camp.hashes, "seconds": out["seconds"],
+            "worker_pid": out["worker_pid"]}
     _json(cdir / store.RESULT_FILE, out["result"])
     if out.get("diagnosis") is not None:
         _json(cdir / store.DIAGNOSIS_FILE, out["diagnosis"])

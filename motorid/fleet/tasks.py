@@ -34,14 +34,14 @@ def default_workers(n_tasks: int | None = None) -> int:
 
 
 @contextlib.contextmanager
-def dask_client(scheduler: str | None = None, workers: int | None = None):
+def dask_client(scheduler: str | None = None, workers: int | None = None, timeout: str = "20s"):
     """A ``dask.distributed.Client``: of the cluster at ``scheduler`` (``tcp://…``),
     or of an embedded ``LocalCluster`` of ``workers`` processes with one thread each."""
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
         try:
-            client = Client(scheduler, timeout="20s")
+            client = Client(scheduler, timeout=timeout)
         except (OSError, TimeoutError, ValueError) as exc:
             msg = " ".join(str(exc).split()) or type(exc).__name__
             raise InputError(f"--scheduler {scheduler}: cannot connect ({msg})") from None
