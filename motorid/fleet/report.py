@@ -39,7 +39,7 @@ def _spread_plot(motor_type: str, pop, verdicts: list) -> str:
     if pop.scale == "log":
         ax.set_yscale("log")
     ax.set_ylabel(pop.parameter + " [SI]")
-    ax.set_title(f"{motor_type}: {pop.parameter} per motor (latest test; ±2 SE; red: out of family)")
+    ax.set_title(f"{motor_type}: {pop.parameter} per motor (latest test, ±2 SE; red: out of family)", fontsize=8.5)
     ax.legend(loc="best")
     return embed_png(fig, f"{pop.parameter} across motors")
 
