@@ -31,7 +31,7 @@ def _spread_plot(motor_type: str, pop, verdicts: list) -> str:
     fig, ax = _figure(figsize=(max(4.0, 0.32 * len(vs) + 2), 2.6))
     lo, mid, hi = pop.band()
     ax.axhspan(lo, hi, color=BAND, alpha=0.12, label="population, central 95 %")
-    ax.axhline(mid, color=BAND, lw=1, label="population centre")
+    ax.axhline(mid, color=BAND, lw=1, label="population median" if pop.scale == "log" else "population mean")
     for i, v in enumerate(vs):
         c = FLAG if v.out_of_family else CLEAN
         ax.errorbar(i, v.value, yerr=2 * v.std, fmt="o", ms=4, color=c, capsize=2)
