@@ -103,7 +103,30 @@ def _faster_noisier():
     return out
 
 
-def run(quick: bool = False) -> str:
+VARIANT_OBJECTS = {"gaussian_stribeck": ("stribeck_friction", GaussianStribeck),
+                   "power_windage": ("hydrodynamic_torque", PowerWindage)}
+
+
+def replicate(job: dict) -> dict:
+    """One replication (a task for motorid.fleet.map_tasks): simulate, diagnose, judge."""
+    objects = None
+    if job.get("objects"):
+        mid, cls = VARIANT_OBJECTS[job["objects"]]
+        objects = {mid: cls()}
+    ds, spec = _campaign(job["pistons"], job["mechanisms"], job["seed"], objects,
+                         _faster_noisier() if job.get("faster") else None)
+    if job["kind"] == "clean":
+        dg = diagnose(ds, spec)
+        names = (",".join(c.mechanism.id for c in dg.accepted) or dg.unexplained[0].where) if dg.mismatch else ""
+        return {"mismatch": bool(dg.mismatch), "names": names}
+    return {"outcome": _outcome(ds, spec, set(job["expected"]))}
+
+
+def run(quick: bool = False, scheduler: str | None = None) -> str:
+    """Every replication runs as a task on Dask (motorid.fleet.map_tasks: an embedded LocalCluster,
+    or the cluster at ``scheduler``); same seeds, same outcomes as the plain loop."""
+    from motorid.fleet import map_tasks
+
     reps = 1 if quick else 3
     fractions = [0.1, 0.25, 0.5, 1.0] if not quick else [0.25, 1.0]
     t0 = time.time()
@@ -115,57 +138,61 @@ def run(quick: bool = False) -> str:
              "Size 1 is the concealed campaign's size in synthetic_data/concealed/truths/ "
              "(Stribeck 2 N·m + 0.002·D(P_A+P_B) below 0.5 rad/s; windage 2 N·m at 2500 rpm; turbulent "
              "leakage 0.12 L/min a port at 250 bar; compressibility 1.2 L/min at 250 bar and 2500 rpm; "
-             "misalignment 0.7 N·m at 1× and 0.4 N·m at 2×; torque offset 0.8 N·m).",
+             "misalignment 0.7 N·m at 1× and 0.4 N·m at 2×; torque offset 0.8 N·m).  The replications "
+             "run as tasks on Dask (motorid.fleet.map_tasks).",
              "",
              "| mechanism | " + " | ".join(f"size × {f:g}" for f in fractions) + " | wrong names |",
              "|---|" + "---|" * (len(fractions) + 1)]
     seed = 1000
+    jobs = []
     for mid in SINGLE:
         pistons, _, mechs = CASES[mid]
-        cells, wrong = [], []
         for f in fractions:
-            right = 0
             for _ in range(reps):
                 seed += 1
-                ds, spec = _campaign(pistons, {mid: _scaled(mechs[mid], f)}, seed)
-                out = _outcome(ds, spec, {mid})
-                right += out == "right"
-                if out.startswith("wrong"):
-                    wrong.append(f"×{f:g}: {out[7:]}")
-            cells.append(f"{right}/{reps}")
-        lines.append(f"| `{mid}` | " + " | ".join(cells) + f" | {'; '.join(wrong) or '—'} |")
-    # false alarms on clean campaigns
+                jobs.append({"kind": "single", "mid": mid, "fraction": f, "pistons": pistons,
+                             "mechanisms": {mid: _scaled(mechs[mid], f)}, "seed": seed, "expected": [mid]})
     n_clean = 4 if quick else 16
-    alarms, names = 0, []
     for i in range(n_clean):
         seed += 1
-        ds, spec = _campaign(9 if i % 2 == 0 else 8, {}, seed)
-        dg = diagnose(ds, spec)
-        if dg.mismatch:
-            alarms += 1
-            names.append(",".join(c.mechanism.id for c in dg.accepted) or dg.unexplained[0].where)
-    lines += ["", f"False alarms on clean campaigns (odd and even piston counts, new seeds): "
-                  f"**{alarms}/{n_clean}**" + (f" ({'; '.join(names)})" if names else "") + "."]
-    # other shapes of the same physics, another bench
-    lines += ["", "Other shapes of the same physics and another bench (named right / campaigns):", "",
-              "| case | result |", "|---|---|"]
+        jobs.append({"kind": "clean", "pistons": 9 if i % 2 == 0 else 8, "mechanisms": {}, "seed": seed})
     variants = [
         ("Gaussian Stribeck curve, constant 3 N·m amplitude, ω_s 0.6 rad/s", "stribeck_friction",
-         {"stribeck_friction": {"T_s": 3.0, "K_p": 0.0, "w_s": 0.6}}, {"stribeck_friction": GaussianStribeck()}, None),
+         {"stribeck_friction": {"T_s": 3.0, "K_p": 0.0, "w_s": 0.6}}, "gaussian_stribeck", False),
         ("windage ∝ ω^1.7 (2 N·m at 2500 rpm)", "hydrodynamic_torque",
-         {"hydrodynamic_torque": {"C_h": 1.2e-5}}, {"hydrodynamic_torque": PowerWindage()}, None),
+         {"hydrodynamic_torque": {"C_h": 1.2e-5}}, "power_windage", False),
         ("torque offset 0.8 N·m, sample rates ×2 and sensor noise ×2", "torque_offset",
-         {"torque_offset": {"T0": 0.8}}, None, "faster"),
-        ("clean motor, sample rates ×2 and sensor noise ×2", None, {}, None, "faster"),
+         {"torque_offset": {"T0": 0.8}}, None, True),
+        ("clean motor, sample rates ×2 and sensor noise ×2", None, {}, None, True),
     ]
-    for words, expect, mechs, objects, bench in variants:
-        right = 0
-        for _ in range(1 if quick else 2):
+    n_var = 1 if quick else 2
+    for k, (words, expect, mechs, objects, faster) in enumerate(variants):
+        for _ in range(n_var):
             seed += 1
-            ds, spec = _campaign(9, mechs, seed, objects, _faster_noisier() if bench else None)
-            out = _outcome(ds, spec, {expect} if expect else set())
-            right += out == "right"
-        lines.append(f"| {words} | {right}/{1 if quick else 2} |")
+            jobs.append({"kind": "variant", "variant": k, "pistons": 9, "mechanisms": mechs, "seed": seed,
+                         "objects": objects, "faster": faster, "expected": [expect] if expect else []})
+    results = map_tasks(replicate, jobs, scheduler=scheduler, desc="replications")
+    for job, res in zip(jobs, results):
+        if not isinstance(res, dict):
+            raise RuntimeError(f"replication seed {job['seed']}: {res.error}")
+    done = list(zip(jobs, results))
+    for mid in SINGLE:
+        cells, wrong = [], []
+        for f in fractions:
+            outs = [r["outcome"] for j, r in done if j["kind"] == "single" and j["mid"] == mid and j["fraction"] == f]
+            cells.append(f"{sum(o == 'right' for o in outs)}/{reps}")
+            wrong += [f"×{f:g}: {o[7:]}" for o in outs if o.startswith("wrong")]
+        lines.append(f"| `{mid}` | " + " | ".join(cells) + f" | {'; '.join(wrong) or '—'} |")
+    clean = [r for j, r in done if j["kind"] == "clean"]
+    alarms = sum(r["mismatch"] for r in clean)
+    names = [r["names"] for r in clean if r["mismatch"]]
+    lines += ["", f"False alarms on clean campaigns (odd and even piston counts, new seeds): "
+                  f"**{alarms}/{n_clean}**" + (f" ({'; '.join(names)})" if names else "") + "."]
+    lines += ["", "Other shapes of the same physics and another bench (named right / campaigns):", "",
+              "| case | result |", "|---|---|"]
+    for k, (words, *_rest) in enumerate(variants):
+        right = sum(r["outcome"] == "right" for j, r in done if j["kind"] == "variant" and j["variant"] == k)
+        lines.append(f"| {words} | {right}/{n_var} |")
     lines += ["", f"Study time {time.time() - t0:.0f} s."]
     return "\n".join(lines)
 

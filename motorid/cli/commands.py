@@ -14,7 +14,7 @@ import argparse
 import os
 import sys
 
-from motorid.cli import demo, diagnose, fit, plan, report, ripple_table, simulate
+from motorid.cli import demo, diagnose, fit, fleet, plan, report, ripple_table, simulate
 from motorid.errors import InputError
 
 #: the commands, in the order ``motorid --help`` lists them
@@ -25,6 +25,7 @@ COMMANDS = (
     report,
     diagnose,
     plan,
+    fleet,
     demo,
 )
 

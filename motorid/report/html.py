@@ -171,7 +171,7 @@ def _section(sid: str, body: str) -> str:
     return f'<section id="{sid}">\n<h2>{esc(name)}</h2>\n{body}\n</section>'
 
 
-def _figure(plot, caption: str, missing: str) -> str:
+def new_figure(plot, caption: str, missing: str) -> str:
     if plot is None:
         return f'<p class="missing">{missing}</p>'
     return f"<figure>{plot.img}<figcaption>{caption}</figcaption></figure>"
@@ -425,7 +425,7 @@ def _model_vs_data(rd: ReportData, figs: dict) -> str:
                                          "not plotted (see the notes in the summary).</p>")
     body = []
     f = figs.get("torque_speed")
-    body.append("<h3>Running torque against speed</h3>" + _figure(
+    body.append("<h3>Running torque against speed</h3>" + new_figure(
         f, (f"One colour per pressure level ({f.facts['levels']} levels: ΔP and oil temperature); circles: "
             "positive direction, squares: negative; lines: the model averaged over a shaft revolution. Each point "
             "is a run's mean, corrected by the model to the level's nominal conditions (the curve plus the run's "
@@ -434,14 +434,14 @@ def _model_vs_data(rd: ReportData, figs: dict) -> str:
             f"{fmt.number(f.facts['band'], 2)} N·m, so it is thin at this scale. Right: the torque lost to "
             "friction and viscous drag.") if f else "", "No running-torque data."))
     f = figs.get("ripple")
-    body.append("<h3>Torque ripple and case-drain flow against shaft angle</h3>" + _figure(
+    body.append("<h3>Torque ripple and case-drain flow against shaft angle</h3>" + new_figure(
         f, ("The slowest run at each pressure level that covers a whole piston pitch (runs "
             f"{esc(', '.join(f.facts['runs']))}): the model at the run's median pressures, speed and oil "
             "temperature, and every reading corrected by the model to those conditions (the curve plus the "
             "reading's residual; the oil warms a little during a slow run). Bands: the model's 95 % band (dark) "
             "and the 95 % band of a single reading, which adds the channel's noise (light).") if f else "", "No slow run covers a whole piston pitch of shaft angle."))
     f = figs.get("breakaway")
-    body.append("<h3>Breakaway torque against pressure and shaft angle</h3>" + _figure(
+    body.append("<h3>Breakaway torque against pressure and shaft angle</h3>" + new_figure(
         f, (f"Left: the load torque held at the instant of breakaway in {f.facts['events']} startability runs "
             "(circles: positive direction, squares: negative); grey: the model over all shaft angles; crosses: "
             "the model at each event. Middle: the static friction the shaft overcame, the pressure torque "
@@ -451,7 +451,7 @@ def _model_vs_data(rd: ReportData, figs: dict) -> str:
             "model's 95 % band (dark) and the 95 % band of a single reading (light).") if f else "",
         "No breakaway events in these logs (ISO 4392-2 runs needed)."))
     f = figs.get("flows")
-    body.append("<h3>Port and case-drain flows against speed</h3>" + _figure(
+    body.append("<h3>Port and case-drain flows against speed</h3>" + new_figure(
         f, ("Run means corrected by the model to each level's nominal conditions, as above. The inlet flow is "
             "port A's in the positive direction and port B's in the negative one. The flow beyond (and short "
             "of) the swept flow D|ω|/2π is the leakage that the laminar coefficients K_L0 and K_AB describe. "
@@ -476,16 +476,16 @@ def _residuals(rd: ReportData, figs: dict) -> str:
            "readings the fit rejected as outliers (beyond 5 σ; drawn at the edge when off the scale). Structure "
            "here (a trend, a step, a ripple) is physics the model lacks. Readings beyond ± 2 σ: "
            f"{beyond}. Readings drawn per channel: {shown}.")
-    return _section("residuals", _figure(f, cap, "No residuals to show."))
+    return _section("residuals", new_figure(f, cap, "No residuals to show."))
 
 
 def _uncertainty(rd: ReportData, figs: dict) -> str:
-    body = ["<h3>Correlation matrix</h3>" + _figure(
+    body = ["<h3>Correlation matrix</h3>" + new_figure(
         figs.get("correlation"), "Correlation of the least-squares estimates (from the covariance of the weighted "
                                  "Jacobian). Near ±1: the data hardly tell the two apart.",
         "No correlation matrix (no parameter was fitted).")]
     f = figs.get("corner")
-    body.append("<h3>Posterior (corner plot)</h3>" + _figure(
+    body.append("<h3>Posterior (corner plot)</h3>" + new_figure(
         f, (f"{fmt.count(f.facts['draws'])} posterior draws after burn-in and thinning; each axis in posterior "
             "standard deviations from the median (the numbers are in the parameter table). Orange: the "
             "least-squares Gaussian. " + (f"First {f.facts['shown']} of {f.facts['total']} parameters."
@@ -494,7 +494,7 @@ def _uncertainty(rd: ReportData, figs: dict) -> str:
     body.append("<h3>Chain diagnostics</h3>" + _chain_diagnostics(rd))
     f = figs.get("traces")
     if f:
-        body.append(_figure(f, f"Traces of {f.facts['walkers']} walkers, in posterior standard deviations from the "
+        body.append(new_figure(f, f"Traces of {f.facts['walkers']} walkers, in posterior standard deviations from the "
                                "median; grey: burn-in, discarded. A good chain looks like stationary noise.", ""))
     return _section("uncertainty", "\n".join(body))
 
@@ -575,7 +575,7 @@ def _efficiency(rd: ReportData, figs: dict) -> str:
         cap = ""
     missing = (_not_identified(rd.doc, EFFICIENCY_NEEDS, "efficiency maps")
                if _unidentified(rd.doc, EFFICIENCY_NEEDS) else "No running data to anchor the maps.")
-    body.append("<h3>Efficiency maps</h3>" + _figure(f, cap, missing))
+    body.append("<h3>Efficiency maps</h3>" + new_figure(f, cap, missing))
     f = figs.get("starting")
     cap = ""
     if f:
@@ -586,7 +586,7 @@ def _efficiency(rd: ReportData, figs: dict) -> str:
                f"{mean:.4f}, worst {worst:.4f}.")
     missing = (_not_identified(rd.doc, STARTING_NEEDS, "starting torque efficiency")
                if _unidentified(rd.doc, STARTING_NEEDS) else "No data to compute it from.")
-    body.append("<h3>Starting torque efficiency</h3>" + _figure(f, cap, missing))
+    body.append("<h3>Starting torque efficiency</h3>" + new_figure(f, cap, missing))
     return _section("efficiency", "\n".join(body))
 
 

@@ -58,7 +58,7 @@ def embed_png(fig, alt: str) -> str:
             f'width="{img.width}" height="{img.height}">')
 
 
-def _figure(*args, **kwargs):
+def new_figure(*args, **kwargs):
     kwargs.setdefault("layout", "constrained")
     with plt.rc_context(STYLE):
         return plt.subplots(*args, **kwargs)
@@ -115,7 +115,7 @@ def plot_torque_speed(rd: ReportData, ens: Ensemble) -> Plot | None:
     if not levels:
         return None
     curves, colors, D = _level_curves(rd, ens, levels), _colors(len(levels)), rd.spec.displacement
-    fig, axes = _figure(1, 2, figsize=(12, 4.6))
+    fig, axes = new_figure(1, 2, figsize=(12, 4.6))
     band_max, corr_max = 0.0, 0.0
     for li, d, rs, w, c, lo, hi in curves:
         lev, col = levels[li], colors[li]
@@ -164,7 +164,7 @@ def plot_flows_speed(rd: ReportData, ens: Ensemble) -> Plot | None:
     if not levels:
         return None
     curves, colors, D = _level_curves(rd, ens, levels), _colors(len(levels)), rd.spec.displacement
-    fig, axes = _figure(2, 2, figsize=(13, 7.6))
+    fig, axes = new_figure(2, 2, figsize=(13, 7.6))
     ax_in, ax_loss, ax_out, ax_case = axes.ravel()
     band_max = 0.0
     for li, d, rs, w, c, lo, hi in curves:
@@ -243,7 +243,7 @@ def plot_ripple(rd: ReportData, ens: Ensemble) -> Plot | None:
             pieces.append(grid_samples(rd.spec, th, med["speed"], med["p_a"], med["p_b"], med["p_case"],
                                        med["viscosity"], r.direction, med["temperature"]))
     center, lo, hi = ens.running(concat_samples(pieces))
-    fig, axes = _figure(len(chosen), 2, figsize=(12, 2.7 * len(chosen) + 0.4), squeeze=False)
+    fig, axes = new_figure(len(chosen), 2, figsize=(12, 2.7 * len(chosen) + 0.4), squeeze=False)
     deg = np.degrees(theta)
     sig_t, sig_c = rd.sigma("torque"), rd.sigma("q_case")
     start = 0
@@ -307,7 +307,7 @@ def plot_breakaway(rd: ReportData, ens: Ensemble) -> Plot | None:
     ok = np.isfinite(e["held"])
     ideal = D * e["dp"] / (2 * np.pi)
     c_ev, lo_ev, hi_ev = ens.breakaway(rd.dataset.events)
-    fig, (ax, ax1, ax2) = _figure(1, 3, figsize=(13.5, 4.4))
+    fig, (ax, ax1, ax2) = new_figure(1, 3, figsize=(13.5, 4.4))
     pos, neg = ok & (e["d"] > 0), ok & (e["d"] < 0)
     # (a) held torque against ΔP; grey: the model over all shaft angles
     dps = np.linspace(0.8 * e["dp"][ok].min(), 1.1 * e["dp"][ok].max(), 60)
@@ -401,7 +401,7 @@ def plot_residuals(rd: ReportData) -> Plot | None:
     if not chans:
         return None
     rng = np.random.default_rng(1)
-    fig, axes = _figure(len(chans), 4, figsize=(12.5, 1.95 * len(chans) + 0.5), squeeze=False)
+    fig, axes = new_figure(len(chans), 4, figsize=(12.5, 1.95 * len(chans) + 0.5), squeeze=False)
     shown, beyond = {}, {}
     for i, ch in enumerate(chans):
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -464,7 +464,7 @@ def plot_discrepancy_residuals(path) -> Plot | None:
     if not chans:
         return None
     rng = np.random.default_rng(2)
-    fig, axes = _figure(len(chans), 2, figsize=(10.5, 1.9 * len(chans) + 0.5), squeeze=False)
+    fig, axes = new_figure(len(chans), 2, figsize=(10.5, 1.9 * len(chans) + 0.5), squeeze=False)
     for i, ch in enumerate(chans):
         before, after = data[f"{ch}__before"], data[f"{ch}__after"]
         keep = np.arange(before.size)
@@ -502,7 +502,7 @@ def plot_correlation(names: list, matrix) -> Plot | None:
         return None
     m = np.array(matrix, dtype=float)
     k = len(names)
-    fig, ax = _figure(figsize=(0.62 * k + 2.2, 0.55 * k + 1.2))
+    fig, ax = new_figure(figsize=(0.62 * k + 2.2, 0.55 * k + 1.2))
     ax.grid(False)
     im = ax.imshow(m, cmap="RdBu_r", vmin=-1, vmax=1)
     ax.set_xticks(range(k), names, rotation=45, ha="right")
@@ -529,7 +529,7 @@ def plot_corner(rd: ReportData, max_params: int = 12) -> Plot | None:
     params = rd.doc.get("parameters", {})
     k = len(names)
     size = min(1.05 * k + 1.0, 12.5)
-    fig, axes = _figure(k, k, figsize=(size, size), squeeze=False, layout=None)
+    fig, axes = new_figure(k, k, figsize=(size, size), squeeze=False, layout=None)
     lim = (-4.5, 4.5)
     grid = np.linspace(*lim, 200)
     for i in range(k):
@@ -579,7 +579,7 @@ def plot_traces(rd: ReportData, walkers: int = 10) -> Plot | None:
     med, sd = np.median(kept, axis=0), np.std(kept, axis=0)
     sd = np.where(sd > 0, sd, 1.0)
     pick = np.linspace(0, nw - 1, min(walkers, nw)).astype(int)
-    fig, axes = _figure(k, 1, figsize=(12, 0.62 * k + 0.9), sharex=True, squeeze=False, layout=None)
+    fig, axes = new_figure(k, 1, figsize=(12, 0.62 * k + 0.9), sharex=True, squeeze=False, layout=None)
     for i in range(k):
         ax = axes[i, 0]
         ax.plot((chain[:, pick, i] - med[i]) / sd[i], lw=0.4, alpha=0.7, rasterized=True)
@@ -618,7 +618,7 @@ def plot_efficiency_maps(rd: ReportData, ens: Ensemble) -> Plot | None:
         eta_v = np.where(q_a > 0, (D * w[None, :] / (2 * np.pi)) / q_a, 0.0)
     eta_v = np.clip(eta_v, 0.0, 1.0)
     eta_t = np.clip(eta_hm, 0.0, 1.0) * eta_v
-    fig, axes = _figure(1, 3, figsize=(13, 4.1))
+    fig, axes = new_figure(1, 3, figsize=(13, 4.1))
     x, y = w * RPM_PER_RAD_S, dps / PA_PER_BAR
     runs = running_runs(rd)
     from matplotlib.ticker import MaxNLocator
@@ -681,7 +681,7 @@ def plot_starting_efficiency(rd: ReportData, ens: Ensemble) -> Plot | None:
     c, lo, hi = ens.breakaway(samples)
     scale = (D * dps / (2 * np.pi))[:, None]
     c, lo, hi = (v.reshape(dps.size, th.size) / scale for v in (c, lo, hi))
-    fig, ax = _figure(figsize=(7.5, 4.2))
+    fig, ax = new_figure(figsize=(7.5, 4.2))
     x = dps / PA_PER_BAR
     ax.plot(x, c.mean(1), color="#1f77b4", label="model, mean over shaft angle")
     _band(ax, x, lo.mean(1), hi.mean(1), "#1f77b4", 0.3)
