@@ -68,9 +68,16 @@ def _grid(n=48, seed=3):
 
 
 def _close(got, ref, rtol):
-    """|got − ref| ≤ rtol·(|ref| + 1e-6·max|ref|): relative, with a floor at a millionth of the channel's range."""
+    """|got − ref| ≤ rtol·(|ref| + 1e-3·max|ref|): relative, with a floor at 10⁻³ of the channel's range.
+
+    A port flow is the swept flow plus leakages of either sign; where they cancel
+    to 10⁻⁵ of the channel the rounding of the terms (10⁻¹⁶ of them) is 10⁻¹¹ of
+    the difference: the floor keeps the test on the model, not on cancellation
+    (benchmarks/bench_export.py: the largest deviation over 20 000 points is
+    10⁻¹⁴ of the channel's range).
+    """
     ref = np.asarray(ref)
-    return np.abs(got - ref) <= rtol * (np.abs(ref) + 1e-6 * np.max(np.abs(ref)))
+    return np.abs(got - ref) <= rtol * (np.abs(ref) + 1e-3 * np.max(np.abs(ref)))
 
 
 def test_mechanisms_read_from_the_diagnosis_and_the_sensor_left_out(motor):
@@ -101,7 +108,7 @@ def test_python_export_agrees_with_the_model_and_needs_numpy_only(motor, result_
     spec = importlib.util.spec_from_file_location("identified_motor", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    x = _grid(200)
+    x = _grid(2000)
     ref, got = evaluate(motor, **x), mod.evaluate(**x)
     for p in OUTPUTS:
         ok = _close(got[p.name], ref[p.name], 1e-12)
@@ -137,7 +144,7 @@ def test_fmu_passes_fmpy_validation_and_simulates_as_the_model(motor, result_dir
                      "torque": ("output", "N.m"), "q_A": ("output", "m3/s"), "q_B": ("output", "m3/s"),
                      "q_case": ("output", "m3/s"), "torque_breakaway": ("output", "N.m")}
 
-    x = _grid()
+    x = _grid(300)
     n = len(x["omega"])
     signal = np.zeros(n, dtype=[("time", np.float64)] + [(p.name, np.float64) for p in INPUTS])
     signal["time"] = np.arange(n, dtype=float)

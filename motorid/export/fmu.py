@@ -25,7 +25,7 @@ import xml.etree.ElementTree as ET
 from datetime import datetime, timezone
 from pathlib import Path
 
-from motorid.errors import InputError, MotorIdError
+from motorid.errors import MotorIdError
 from motorid.export.fmu_c import wrapper_source
 from motorid.export.jaxpr_c import emit_c_function
 from motorid.export.motor import INPUTS, OUTPUTS, IdentifiedMotor, traced
@@ -208,7 +208,3 @@ def require_compiler() -> str | None:
     if not any(shutil.which(c) for c in ("cc", "gcc", "clang")):
         return "no C compiler (cc, gcc or clang) is on the PATH"
     return None
-
-
-def fmu_error_as_input(exc: FmuBuildError) -> InputError:
-    return InputError(str(exc))

@@ -186,8 +186,7 @@ class _Emitter:
             return
 
         def expr(i):
-            base, acc = self.ref(x, i), None
-            text_x, text_acc = base, None
+            text_x, text_acc = self.ref(x, i), None
             for s in steps:  # nested expressions: small exponents only, as in a model
                 if s == "set_acc":
                     text_acc = text_x
@@ -195,7 +194,6 @@ class _Emitter:
                     text_acc = f"({text_acc} * {text_x})"
                 else:
                     text_x = f"({text_x} * {text_x})"
-            del acc
             return f"(1.0 / {text_acc})" if reciprocal else text_acc
         self.define(out, expr)
 
