@@ -14,7 +14,7 @@ import argparse
 import os
 import sys
 
-from motorid.cli import demo, diagnose, fit, fleet, plan, report, ripple_table, simulate
+from motorid.cli import demo, diagnose, export, fit, fleet, plan, report, ripple_table, simulate
 from motorid.errors import InputError
 
 #: the commands, in the order ``motorid --help`` lists them
@@ -26,6 +26,7 @@ COMMANDS = (
     diagnose,
     plan,
     fleet,
+    export,
     demo,
 )
 

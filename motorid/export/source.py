@@ -1,0 +1,162 @@
+"""Read what an export needs from a fit's folder: result.json, its motor spec, diagnosis.json.
+
+result.json holds the parameter values and the motor's geometry but not its
+oil, which the exports need for the viscosity at T_oil; the spec comes from
+the file result.json names (``inputs.motor``, tried as given, relative to the
+working folder and to RESULT_DIR) or from ``--motor``, and must agree with the
+geometry result.json recorded.  A ``diagnosis.json`` beside result.json (from
+``motorid diagnose --out RESULT_DIR``) adds its accepted mechanisms; the base
+parameters are then those of the diagnosis' final joint fit
+(``parameters_after``), refitted with the mechanisms, since result.json's
+values were fitted without them.
+
+Mechanisms that describe the bench's sensors rather than the motor (a torque
+transducer's zero offset) are left out of every export, with a note.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from motorid.errors import InputError
+from motorid.export.motor import IdentifiedMotor
+from motorid.io.spec import load_motor_spec
+from motorid.model import MotorSpec
+
+#: mechanisms of the catalog that model a bench sensor's reading, not the motor
+SENSOR_MECHANISMS = frozenset({"torque_offset"})
+
+
+def is_sensor(mech) -> bool:
+    """True for a mechanism that changes a sensor's reading rather than the motor's physics."""
+    return mech.id in SENSOR_MECHANISMS or bool(getattr(mech, "sensor", False))
+
+
+def _read_json(path: Path, what: str) -> dict:
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: {what} must be a JSON object")
+    return doc
+
+
+def _value(entry, key: str, where: str) -> float:
+    value = entry.get("value") if isinstance(entry, dict) else entry
+    if value is None:
+        reason = entry.get("reason", "not determined by the logs") if isinstance(entry, dict) else ""
+        raise InputError(f"{where}: parameter '{key}' has no value ({reason}); the export needs every parameter")
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{where}: parameter '{key}' must be a number, got {value!r}") from None
+    if not math.isfinite(value):
+        raise InputError(f"{where}: parameter '{key}' must be finite, got {value!r}")
+    return value
+
+
+def _check_spec(spec: MotorSpec, motor: dict, spec_path, result_path) -> None:
+    checks = (("pistons", spec.pistons, motor.get("pistons")),
+              ("displacement_m3", spec.displacement, motor.get("displacement_m3")),
+              ("inertia_kg_m2", spec.inertia, motor.get("inertia_kg_m2")),
+              ("leak_phase_rad", spec.phase, motor.get("leak_phase_rad")))
+    for key, have, want in checks:
+        if want is None:
+            continue
+        if not math.isclose(float(have), float(want), rel_tol=1e-9, abs_tol=1e-15):
+            raise InputError(f"{spec_path}: motor spec does not match {result_path} (motor.{key}: spec "
+                             f"{have!r}, result {want!r})")
+    if spec.oil is None:
+        raise InputError(f"{spec_path}: the motor spec has no [oil] table; the export needs the oil for the "
+                         "viscosity at T_oil")
+
+
+def _find_spec(doc: dict, result_dir: Path, result_path: Path):
+    named = (doc.get("inputs") or {}).get("motor")
+    tried = []
+    if isinstance(named, str) and named:
+        p = Path(named)
+        for cand in ([p] if p.is_absolute() else [Path.cwd() / p, result_dir / p, result_dir / p.name]):
+            tried.append(str(cand))
+            if cand.is_file():
+                return cand
+    cand = result_dir / "motor.toml"
+    tried.append(str(cand))
+    if cand.is_file():
+        return cand
+    raise InputError(f"{result_path}: cannot recover the motor spec (the oil is not in result.json; looked for "
+                     f"{', '.join(tried)}); give it with --motor SPEC.toml")
+
+
+def load_identified(result_dir, motor=None, diagnosis: bool = True) -> IdentifiedMotor:
+    """The identified motor of a fit's folder (see the module docstring).
+
+    result_dir : folder holding result.json; motor : a spec TOML overriding the
+    one result.json names; diagnosis : include the mechanisms of a
+    diagnosis.json beside result.json.
+    """
+    from motorid.physics.registry import get
+
+    result_dir = Path(result_dir)
+    result_path = result_dir / "result.json"
+    if not result_dir.is_dir():
+        raise InputError(f"{result_dir}: RESULT_DIR is not a folder")
+    if not result_path.is_file():
+        raise InputError(f"{result_dir}: RESULT_DIR holds no result.json (write one with motorid fit --out)")
+    doc = _read_json(result_path, "result.json")
+    for key in ("parameters", "motor"):
+        if not isinstance(doc.get(key), dict):
+            raise InputError(f"{result_path}: missing object '{key}'")
+    spec_path = Path(motor) if motor is not None else _find_spec(doc, result_dir, result_path)
+    spec = load_motor_spec(spec_path)
+    _check_spec(spec, doc["motor"], spec_path, result_path)
+
+    params = {k: _value(e, k, str(result_path)) for k, e in doc["parameters"].items()}
+    mech_ids = list((doc.get("fit") or {}).get("mechanisms") or [])
+    notes = [f"parameters from {result_path}", f"motor spec and oil from {spec_path}"]
+
+    diag_path = result_dir / "diagnosis.json"
+    if diagnosis and diag_path.is_file():
+        diag = _read_json(diag_path, "diagnosis.json")
+        accepted = diag.get("mechanisms") or []
+        if accepted:
+            after = diag.get("parameters_after") or {}
+            for k, e in after.items():
+                if k in params:
+                    params[k] = _value(e, k, str(diag_path))
+            for m in accepted:
+                mid = m.get("id") if isinstance(m, dict) else None
+                if not isinstance(mid, str):
+                    raise InputError(f"{diag_path}: a mechanism without an 'id'")
+                for k, e in (m.get("parameters") or {}).items():
+                    params[k] = _value(e, k, str(diag_path))
+                if mid not in mech_ids:
+                    mech_ids.append(mid)
+            notes.append(f"mechanisms accepted by {diag_path}: {', '.join(m['id'] for m in accepted)} "
+                         "(base parameters from its joint refit, parameters_after)")
+    mechanisms = []
+    for mid in mech_ids:
+        try:
+            mech = get(mid)
+        except InputError as exc:
+            raise InputError(f"{result_path}: {exc}") from None
+        if is_sensor(mech):
+            notes.append(f"left out: {mid} ({mech.name}) describes the bench's sensor, not the motor")
+            continue
+        missing = [k for k in mech.parameters if k not in params]
+        if missing:
+            raise InputError(f"{result_path}: mechanism '{mid}' lacks parameter(s) {', '.join(missing)}")
+        mechanisms.append(mech)
+    base = [k for k in params if "." not in k]
+    for need in ("Kv", "KF", "KFS", "TFc", "Ks", "KL0", "KAB"):
+        if need not in base:
+            raise InputError(f"{result_path}: parameters lack '{need}'")
+    keep = set(base) | {k for m in mechanisms for k in m.parameters}
+    params = {k: v for k, v in params.items() if k in keep}
+    return IdentifiedMotor(spec=spec, params=params, mechanisms=tuple(mechanisms),
+                           source=str(result_path), notes=notes)

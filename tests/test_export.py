@@ -1,0 +1,250 @@
+"""motorid export: the FMU, the Python module and the Simscape tables against the model itself.
+
+The fixture is the demo fit (reports/demo/result.json) with a diagnosis.json
+beside it that accepts several catalog mechanisms (friction, ripple, churning,
+case-pressure seal friction, orifice and Barus leakage) and a torque
+transducer offset, which the exports must leave out.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from motorid.export import export
+from motorid.export.motor import INPUTS, OUTPUTS, evaluate
+from motorid.export.source import load_identified
+
+REPO = Path(__file__).resolve().parent.parent
+DEMO = REPO / "reports" / "demo"
+
+MECHANISMS = {
+    "stribeck_friction": {"T_s": 1.5, "K_p": 2e-3, "w_s": 0.4},
+    "misalignment_ripple": {"A1": 0.8, "B1": -0.5, "A2": 0.3, "B2": 0.2},
+    "hydrodynamic_torque": {"C_h": 4e-5},
+    "case_pressure_friction": {"K_c": 0.05},
+    "turbulent_leakage": {"C_t": 4e-10},
+    "pressure_viscosity": {"alpha": 1.2e-8},
+    "torque_offset": {"T0": 1.7},
+}
+
+
+def _diagnosis(result: dict) -> dict:
+    after = {k: {"value": e["value"] * 1.01, "std": e["std"]} for k, e in result["parameters"].items()}
+    mechs = [{"id": mid, "name": mid, "parameters": {f"{mid}.{k}": {"value": v, "std": 0.0, "unit": "-"}
+                                                      for k, v in values.items()}}
+             for mid, values in MECHANISMS.items()]
+    return {"mismatch": True, "mechanisms": mechs, "parameters_after": after}
+
+
+@pytest.fixture(scope="module")
+def result_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fit")
+    doc = json.loads((DEMO / "result.json").read_text())
+    doc["inputs"]["motor"] = str(REPO / "synthetic_data" / "demo" / "motor.toml")
+    (d / "result.json").write_text(json.dumps(doc))
+    (d / "diagnosis.json").write_text(json.dumps(_diagnosis(doc)))
+    return d
+
+
+@pytest.fixture(scope="module")
+def motor(result_dir):
+    return load_identified(result_dir)
+
+
+def _grid(n=48, seed=3):
+    """Operating points over the motor's whole range, both directions, slow and fast, hot and cold."""
+    rng = np.random.default_rng(seed)
+    speed = rng.choice([-1, 1], n) * np.exp(rng.uniform(np.log(1e-3), np.log(320.0), n))
+    return {"p_A": rng.uniform(0, 350e5, n), "p_B": rng.uniform(0, 350e5, n), "p_case": rng.uniform(0, 5e5, n),
+            "omega": speed, "theta": rng.uniform(-20, 20, n), "T_oil": rng.uniform(285, 360, n)}
+
+
+def _close(got, ref, rtol):
+    """|got − ref| ≤ rtol·(|ref| + 1e-3·max|ref|): relative, with a floor at 10⁻³ of the channel's range.
+
+    A port flow is the swept flow plus leakages of either sign; where they cancel
+    to 10⁻⁵ of the channel the rounding of the terms (10⁻¹⁶ of them) is 10⁻¹¹ of
+    the difference: the floor keeps the test on the model, not on cancellation
+    (benchmarks/bench_export.py: the largest deviation over 20 000 points is
+    10⁻¹⁴ of the channel's range).
+    """
+    ref = np.asarray(ref)
+    return np.abs(got - ref) <= rtol * (np.abs(ref) + 1e-3 * np.max(np.abs(ref)))
+
+
+def test_mechanisms_read_from_the_diagnosis_and_the_sensor_left_out(motor):
+    ids = {m.id for m in motor.mechanisms}
+    assert ids == set(MECHANISMS) - {"torque_offset"}
+    assert any("torque_offset" in n and "sensor" in n for n in motor.notes)
+    # base parameters from the diagnosis' joint refit, not result.json's
+    demo = json.loads((DEMO / "result.json").read_text())["parameters"]
+    assert motor.params["Kv"] == pytest.approx(demo["Kv"]["value"] * 1.01, rel=1e-14)
+
+
+def test_mechanisms_change_what_the_model_exports(motor):
+    """The mechanisms are in the exported function, by the physics of each (so the agreement tests have teeth)."""
+    from motorid.export.motor import IdentifiedMotor
+
+    x = _grid()
+    bare = IdentifiedMotor(motor.spec, motor.params, ())
+    full, base = evaluate(motor, **x), evaluate(bare, **x)
+    K_c = MECHANISMS["case_pressure_friction"]["K_c"]
+    np.testing.assert_allclose(np.asarray(full["torque_breakaway"] - base["torque_breakaway"]),
+                               K_c * motor.spec.displacement * x["p_case"], rtol=1e-9, atol=1e-12)
+    assert np.max(np.abs(np.asarray(full["torque"] - base["torque"]))) > 0.5  # ripple, friction, churning
+    assert np.max(np.abs(np.asarray(full["q_case"] - base["q_case"]))) > 1e-6  # orifice leakage
+
+
+def test_python_export_agrees_with_the_model_and_needs_numpy_only(motor, result_dir, tmp_path):
+    path = export(result_dir, "python", tmp_path / "identified_motor.py")
+    spec = importlib.util.spec_from_file_location("identified_motor", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    x = _grid(2000)
+    ref, got = evaluate(motor, **x), mod.evaluate(**x)
+    for p in OUTPUTS:
+        ok = _close(got[p.name], ref[p.name], 1e-12)
+        assert ok.all(), (p.name, np.max(np.abs(got[p.name] - np.asarray(ref[p.name]))))
+    one = mod.evaluate(20e6, 1e6, 2e5, 10.0, 0.1, 320.0)  # scalars give 0-d arrays
+    assert one["torque"].shape == () and np.isfinite(one["torque"])
+    code = (f"import sys; sys.path.insert(0, {str(tmp_path)!r}); import identified_motor as m; "
+            "m.evaluate(1e7, 0, 0, 1.0, 0.0, 313.15); "
+            "bad = [k for k in sys.modules if k.split('.')[0] in ('jax', 'motorid', 'scipy')]; "
+            "assert not bad, bad")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=tmp_path)
+
+
+def _no_compiler_reason():
+    from motorid.export.fmu import require_compiler
+
+    return require_compiler()
+
+
+@pytest.mark.skipif(_no_compiler_reason() is not None, reason=f"FMU not built: {_no_compiler_reason()}")
+def test_fmu_passes_fmpy_validation_and_simulates_as_the_model(motor, result_dir, tmp_path):
+    import fmpy
+
+    from motorid.export.fmu import validate
+
+    path = export(result_dir, "fmu", tmp_path / "motor.fmu")
+    assert validate(path) == []
+    md = fmpy.read_model_description(str(path))
+    assert md.fmiVersion == "2.0" and md.modelExchange is not None and md.coSimulation is not None
+    table = {v.name: (v.causality, v.unit) for v in md.modelVariables}
+    assert table == {"p_A": ("input", "Pa"), "p_B": ("input", "Pa"), "p_case": ("input", "Pa"),
+                     "omega": ("input", "rad/s"), "theta": ("input", "rad"), "T_oil": ("input", "K"),
+                     "torque": ("output", "N.m"), "q_A": ("output", "m3/s"), "q_B": ("output", "m3/s"),
+                     "q_case": ("output", "m3/s"), "torque_breakaway": ("output", "N.m")}
+
+    x = _grid(300)
+    n = len(x["omega"])
+    signal = np.zeros(n, dtype=[("time", np.float64)] + [(p.name, np.float64) for p in INPUTS])
+    signal["time"] = np.arange(n, dtype=float)
+    for p in INPUTS:
+        signal[p.name] = x[p.name]
+    ref = evaluate(motor, **x)
+    names = [p.name for p in OUTPUTS]
+    me = fmpy.simulate_fmu(str(path), fmi_type="ModelExchange", start_time=0.0, stop_time=n - 1.0,
+                           step_size=1.0, output_interval=1.0, input=signal, output=names)
+    assert len(me) == n
+    for name in names:
+        ok = _close(me[name], ref[name], 1e-9)
+        assert ok.all(), (name, np.max(np.abs(me[name] - np.asarray(ref[name]))))
+    # Co-Simulation holds each input over its step: the output at point k is the model at point k − 1
+    cs = fmpy.simulate_fmu(str(path), fmi_type="CoSimulation", start_time=0.0, stop_time=n - 1.0,
+                           step_size=1.0, output_interval=1.0, input=signal, output=names)
+    for name in names:
+        assert _close(cs[name][1:n], np.asarray(ref[name])[:-1], 1e-9).all(), name
+
+
+def test_simscape_tables_within_their_stated_interpolation_error(motor, result_dir, tmp_path):
+    from scipy.interpolate import RegularGridInterpolator
+    from scipy.io import loadmat
+
+    from motorid.export.simscape import theta_nodes
+
+    out = export(result_dir, "simscape", tmp_path / "tables", max_pressure=300e5, max_speed=250.0,
+                 rel_tol=5e-3, max_points=41)
+    mat = loadmat(out / "simscape_losses.mat")
+    dp, w = mat["pressure_drop_Pa"].ravel(), mat["shaft_speed_rad_s"].ravel()
+    readme = (out / "README.txt").read_text()
+    assert "Mechanical loss table" in readme and f"{mat['torque_loss_error_bound_Nm'].item():.3g}" in readme
+    csv = np.loadtxt(out / "torque_loss.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(csv[:, 0], dp)
+    np.testing.assert_array_equal(csv[:, 1:], mat["torque_loss_Nm"])
+
+    # the model itself (JAX), θ-averaged, at random points between the breakpoints, |ω| ≥ speed_min
+    rng = np.random.default_rng(7)
+    m = 60
+    w_min = mat["speed_min_rad_s"].item()
+    pts_dp = rng.uniform(dp[0], dp[-1], m)
+    pts_w = rng.choice([-1, 1], m) * np.exp(rng.uniform(np.log(w_min), np.log(w[-1]), m))
+    theta, weights = theta_nodes(motor.spec.pistons)
+    T, p_low, p_case = (mat[k].item() for k in ("temperature_K", "low_side_pressure_Pa", "case_pressure_Pa"))
+    p_a = p_low + np.maximum(pts_dp, 0)[:, None]
+    p_b = p_low + np.maximum(-pts_dp, 0)[:, None]
+    ref = {k: np.asarray(v) @ weights for k, v in evaluate(
+        motor, p_A=p_a, p_B=p_b, p_case=p_case, omega=pts_w[:, None], theta=theta[None, :], T_oil=T).items()}
+    D = motor.spec.displacement
+    swept = D * pts_w / (2 * np.pi)
+    model_torque_loss = D * pts_dp / (2 * np.pi) - ref["torque"]
+    model_vol_loss = np.where(pts_dp >= 0, ref["q_A"] - swept, -(ref["q_B"] + swept))
+    where = np.column_stack([pts_dp, pts_w])
+    for table, model, bound in (("torque_loss_Nm", model_torque_loss, "torque_loss_error_bound_Nm"),
+                                ("volumetric_loss_m3_s", model_vol_loss, "volumetric_loss_error_bound_m3_s"),
+                                ("case_flow_m3_s", ref["q_case"], "case_flow_error_bound_m3_s")):
+        approx = RegularGridInterpolator((dp, w), mat[table])(where)
+        err = np.max(np.abs(approx - model))
+        assert err <= mat[bound].item(), (table, err, mat[bound].item())
+        assert mat[bound].item() < 1e-2 * np.max(np.abs(mat[table])), table  # a bound worth stating
+    # the conventions the README states: friction opposes motion, leakage runs from high to low pressure
+    tl, vl = mat["torque_loss_Nm"], mat["volumetric_loss_m3_s"]
+    assert (tl[:, w > 0] > 0).all() and (tl[:, w < 0] < 0).all()
+    assert (vl[dp > 0] > 0).all() and (vl[dp < 0] < 0).all()
+
+
+def test_bad_result_dir_is_one_line_and_exit_2(tmp_path, capsys):
+    from motorid.cli import main
+
+    out = tmp_path / "m.py"
+    assert main(["export", str(tmp_path / "missing"), "--format", "python", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "missing" in err and "RESULT_DIR" in err
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "result.json").write_text("{not json")
+    assert main(["export", str(bad), "--format", "fmu", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "result.json" in err
+    nospec = tmp_path / "nospec"
+    nospec.mkdir()
+    doc = json.loads((DEMO / "result.json").read_text())
+    doc["inputs"]["motor"] = "elsewhere/motor.toml"
+    (nospec / "result.json").write_text(json.dumps(doc))
+    assert main(["export", str(nospec), "--format", "python", "--out", str(out)]) == 2
+    assert "--motor" in capsys.readouterr().err
+    assert not out.exists()
+    # with --motor the same folder exports
+    shutil.copy(REPO / "synthetic_data" / "demo" / "motor.toml", tmp_path / "spec.toml")
+    assert main(["export", str(nospec), "--format", "python", "--out", str(out),
+                 "--motor", str(tmp_path / "spec.toml")]) == 0 and out.exists()
+
+
+def test_unknown_primitive_is_refused_by_name():
+    import jax
+    import jax.numpy as jnp
+
+    from motorid.export.jaxpr_c import emit_c_function
+    from motorid.export.jaxpr_flat import UnsupportedPrimitive
+
+    jaxpr = jax.make_jaxpr(lambda x: jnp.sum(jnp.cumsum(jnp.ones(3) * x)))(1.0)
+    with pytest.raises(UnsupportedPrimitive, match="cumsum"):
+        emit_c_function(jaxpr)
