@@ -480,6 +480,8 @@ class PressureViscosity(CatalogMechanism):
 # ---------------------------------------------------------------------------
 # the catalog
 
+from motorid.physics import sensors as _sensors, spec_errors as _spec_errors  # noqa: E402  (issue 15)
+
 _ALL = (
     StribeckFriction(),
     HydrodynamicTorque(),
@@ -489,6 +491,8 @@ _ALL = (
     TorqueOffset(),
     CasePressureFriction(),
     PressureViscosity(),
+    *_spec_errors.MECHANISMS,  # displacement_error, leak_phase
+    *_sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, sensor_lag_<channel>
 )
 
 #: every mechanism by id (singletons)
