@@ -8,7 +8,9 @@ Two duties, hooked into :func:`motorid.discrepancy.select.diagnose`:
    speeds and predicts the high half, and the other way round; the same over
    the pressure difference.  A mechanism that is the motor's physics predicts
    the other half as well as a fit on all runs does; a stand-in that bends
-   itself to the structure of one half does not.  The candidate is refused when
+   itself to the structure of one half does not.  Where the runs span more than
+   5 °C of oil temperature, the same split over the temperature (a law in 1/μ
+   and a stand-in ∝ ΔP/μ part there).  The candidate is refused when
    the held-out χ² of some split exceeds that of the all-runs fit on the same
    samples by more than ``max(MIN_EXCESS, EXCESS_FRACTION·χ²)``.
 2. :func:`unexplained_entries` — what stays located after the selection, one
@@ -31,13 +33,16 @@ EXCESS_FRACTION = 0.1
 
 
 def region_masks(dataset) -> dict:
-    """Run-level halves: ``{(low words, high words): bool per run (True = low half)}``, speed and ΔP."""
+    """Run-level halves: ``{(low words, high words): bool per run (True = low half)}``: speed, ΔP, oil temperature."""
     runs = dataset.runs
     out = {}
     moving = np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)) > 0
     for var, col, unit, f in (("speed", "speed_median_rad_s", "rpm", 60 / (2 * np.pi)),
-                              ("pressure difference", "dp_median_Pa", "bar", 1e-5)):
+                              ("pressure difference", "dp_median_Pa", "bar", 1e-5),
+                              ("oil temperature", "temp_median_C", "°C", 1.0)):
         v = np.abs(runs[col].to_numpy(dtype=float))
+        if var == "oil temperature" and np.nanmax(v[moving]) - np.nanmin(v[moving]) < 5.0:
+            continue  # one oil temperature (within a drift): no split
         ok = moving & np.isfinite(v)
         if np.unique(np.round(v[ok], 6)).size < 2:
             continue

@@ -60,14 +60,15 @@ def _torque_order3_dp(f, c):
 EXTRA = {"friction_inverse_viscosity": _friction_inverse_viscosity, "case_leak_pa_pb": _case_leak_pa_pb,
          "torque_order3_dp": _torque_order3_dp}
 
-# name: (pistons, seed, physics {mechanism: {parameter: value}}, transducers, extra {effect: size})
+# name: (pistons, seed, physics {mechanism: {parameter: value}}, transducers, extra {effect: size}
+#        [, protocol folder: default causes_protocols])
 #   transducers: {"gain": {channel: g}, "lag": {channel: τ [s]}, "offset_sd": {channel: σ [SI]}}
 CASES = {
     "displacement_error": (9, 201, {"displacement_error": {"eps": -0.02}}, {}, {}),
     "displacement_error_8": (8, 202, {"displacement_error": {"eps": 0.015}}, {}, {}),
     "flow_meter_gain_a": (9, 203, {}, {"gain": {"q_a": 0.01}}, {}),
     "flow_meter_gain_case": (8, 204, {}, {"gain": {"q_case": -0.04}}, {}),
-    "torque_meter_gain": (9, 205, {}, {"gain": {"torque": 0.01}}, {}),
+    "torque_meter_gain": (9, 205, {}, {"gain": {"torque": 0.01}}, {}, "causes_protocols_back_pressure"),
     "sensor_lag_torque": (9, 206, {}, {"lag": {"torque": 2e-3}}, {}),
     "sensor_lag_q_a": (8, 207, {}, {"lag": {"q_a": 1e-3}}, {}),
     "leak_phase": (9, 208, {"leak_phase": {"dphi": 0.12}}, {}, {}),
@@ -94,7 +95,8 @@ def truth_document(pistons: int, physics: dict, sensors: dict, extra: dict) -> s
     for ch, sd in sensors.get("offset_sd", {}).items():
         text += f"\n[per_run_offset.{ch}]\nsd = {sd!r}\n"
     for effect, size in extra.items():
-        text += f"\n[extra.{effect}]\nc = {size!r}\n# {EXTRA[effect].__doc__}\n"
+        doc = " ".join(EXTRA[effect].__doc__.split())
+        text += f"\n[extra.{effect}]\nc = {size!r}\n# {doc}\n"
     return text
 
 
@@ -170,7 +172,8 @@ def make(name: str, dest_root: Path = HERE, truths: Path = HERE / "truths") -> P
     from motorid.logs import write_log
     from motorid.spec import load_motor_spec
 
-    pistons, seed, physics, sensors, extra = CASES[name]
+    pistons, seed, physics, sensors, extra = CASES[name][:5]
+    folder = HERE / (CASES[name][5] if len(CASES[name]) > 5 else "causes_protocols")
     truths.mkdir(parents=True, exist_ok=True)
     text = truth_document(pistons, physics, sensors, extra)
     (truths / f"causes_{name}.toml").write_text(text)
@@ -182,7 +185,7 @@ def make(name: str, dest_root: Path = HERE, truths: Path = HERE / "truths") -> P
     table = tomllib.loads(text)
     truth = parse_truth({"parameters": table["parameters"], "mechanisms": {k: v for k, v in table.get(
         "mechanisms", {}).items() if k in physics}}, f"causes_{name}")
-    protocols = [load_protocol(p) for p in sorted(PROTOCOLS.glob("*.toml"))]
+    protocols = [load_protocol(p) for p in sorted(folder.glob("*.toml"))]
     frame = simulate_case(spec, truth, protocols, seed, sensors, extra)
     write_log(frame, dest / "campaign.csv.gz")
     return dest
