@@ -148,7 +148,9 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         say(f"structure in {', '.join(sorted(channels))}; trying {len(catalog) - len(current_mechs)} mechanisms")
         scored = []
         for mech in catalog:
-            if mech in current_mechs or not channels & set(mech.channels):
+            # shows_in: where its residual appears once the base fit has compromised (a case-meter gain shows
+            # in the port flows, as K_L0 follows the case meter); default: the channels it acts on
+            if mech in current_mechs or not channels & set(getattr(mech, "shows_in", mech.channels)):
                 continue
             fit = _best_of_starts(dataset, spec, current_mechs + [mech], noise, inliers, current.params_all, mech)
             d = current.chi2 - fit.chi2

@@ -133,6 +133,8 @@ class MeterGain(CatalogMechanism):
         else:
             self.id = f"flow_meter_gain_{_SUFFIX[channel]}"
             self.channels = (channel,)
+            # the mass balance ties the three meters: the base fit spreads one meter's error over all flows
+            self.shows_in = ("q_a", "q_b", "q_case")
             if channel == "q_case":
                 self.signature = ("case-drain flow in proportion to itself (∝ the leakage, ΔP/μ), while the port "
                                   "flows agree: the mass balance Q_A + Q_B = Q_case breaks by g·Q_case, seen at low "

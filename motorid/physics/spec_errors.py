@@ -106,6 +106,7 @@ class LeakPhase(CatalogMechanism):
     reference = ("R. D. Bartos, JPL TDA Progress Report 42-111, 1992 (Eq. 52-55); R. E. Johnson, 'Leakage in "
                  "hydraulic motors as a function of shaft angle', 1980 (the seed's reference on K_L(θ))")
     channels = ("q_b", "q_case")
+    shows_in = ("q_a", "q_b", "q_case")  # the shared K_L harmonics compromise between the ports
     parameters = {
         "leak_phase.dphi": ParameterInfo("rad", "leak phase φ minus the spec's (π/n by default)", False, 0.1),
     }
