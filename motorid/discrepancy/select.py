@@ -47,6 +47,9 @@ class Diagnosis:
     location_after: Location
     steps: list  # per stage: [{id, delta_bic, cv_gain, accepted}]
     unexplained: list  # [Structure]
+    # issue 15: candidates refused as stand-ins, and the unexplained structure in words with empirical terms
+    refused: list = field(default_factory=list)  # [{id, why, extrapolation}]
+    unexplained_detail: list | None = None  # unexplained.unexplained_entries
 
 
 def _fixed(ls: FitResult) -> tuple[dict, dict]:
@@ -97,6 +100,8 @@ def _starts(current: dict, mech) -> list:
     typical size, smaller and larger, and the default start (a nonlinear
     parameter such as a characteristic speed has local minima)."""
     init = mech.initial()
+    if getattr(mech, "single_start", False):  # linear in its parameters (a gain, an error ε): one start
+        return [{**current, **init}]
     out = [{**current, **init}, dict(init)]
     for factor in (0.25, 4.0):
         out.append({**current, **{k: v * factor if mech.parameters[k].positive else v for k, v in init.items()}})
@@ -123,9 +128,12 @@ def _structure_key(s) -> tuple:
 
 def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
              alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 3, cv_top: int = 1,
-             max_mechanisms: int = 3, progress=None) -> Diagnosis:
+             max_mechanisms: int = 3, progress=None, check_regions: bool = True) -> Diagnosis:
     """Find, name and model what the base model leaves out (see module doc)."""
+    from motorid.discrepancy.unexplained import extrapolation_check, unexplained_entries
+
     say = progress or (lambda msg: None)
+    refused: list = []
     catalog = list(mechanisms) if mechanisms is not None else all_mechanisms()
     base = base or fit_least_squares(dataset, spec)
     noise, inliers = _fixed(base)
@@ -140,7 +148,9 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         say(f"structure in {', '.join(sorted(channels))}; trying {len(catalog) - len(current_mechs)} mechanisms")
         scored = []
         for mech in catalog:
-            if mech in current_mechs or not channels & set(mech.channels):
+            # shows_in: where its residual appears once the base fit has compromised (a case-meter gain shows
+            # in the port flows, as K_L0 follows the case meter); default: the channels it acts on
+            if mech in current_mechs or not channels & set(getattr(mech, "shows_in", mech.channels)):
                 continue
             fit = _best_of_starts(dataset, spec, current_mechs + [mech], noise, inliers, current.params_all, mech)
             d = current.chi2 - fit.chi2
@@ -170,8 +180,17 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
                     cand.location = after
                     best = cand
                     break
+        if best is not None and check_regions:  # issue 15: a name must also predict where it was not fitted
+            best.extrapolation = extrapolation_check(dataset, spec, current_mechs + [best.mechanism], noise,
+                                                     inliers, best.fit)
+            if not best.extrapolation["passed"]:
+                say(f"refused {best.mechanism.id}: it does not predict the operating regions it was not fitted on")
+                refused.append({"id": best.mechanism.id, "why": "fails where it was not fitted (stand-in)",
+                                "extrapolation": best.extrapolation})
+                best = None
         steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
-                       "cv_gain": c.cv_gain, "accepted": c is best} for c in scored])
+                       "cv_gain": c.cv_gain, "accepted": c is best,
+                       "extrapolation": getattr(c, "extrapolation", None)} for c in scored])
         if best is None:
             break
         say(f"kept {best.mechanism.id} (ΔBIC {best.delta_bic:.1f})")
@@ -184,8 +203,10 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     final = fit_least_squares(dataset, spec, current_mechs, initial=current.params_all) if accepted else base
     loc_after = locate(final, dataset, spec, alpha=alpha, min_effect=min_effect) if accepted else loc0
     unexplained = list(loc_after.significant)
+    detail = unexplained_entries(unexplained, final, dataset, spec) if unexplained else []
     return Diagnosis(mismatch=bool(accepted or unexplained), base=base, final=final, accepted=accepted,
-                     location_before=loc0, location_after=loc_after, steps=steps, unexplained=unexplained)
+                     location_before=loc0, location_after=loc_after, steps=steps, unexplained=unexplained,
+                     refused=refused, unexplained_detail=detail)
 
 
 def _rms(ls: FitResult, c: str):
@@ -212,7 +233,7 @@ def diagnosis_document(dg: Diagnosis, spec) -> dict:
         where = "; ".join(s.where for s in cand.removed[:4]) or "; ".join(
             s.where for s in dg.location_before.significant if s.channel in m.channels)[:400]
         try:
-            words = m.describe({k: dg.final.values.get(k) for k in m.parameters})
+            words = m.describe({k: dg.final.values.get(k) for k in m.parameters}, spec=spec)
         except Exception:  # a description is a courtesy, never a failure
             words = ""
         mechs.append({
@@ -231,8 +252,10 @@ def diagnosis_document(dg: Diagnosis, spec) -> dict:
         "parameters_before": {k: {"value": dg.base.values[k], "std": dg.base.std[k]} for k in dg.base.names},
         "parameters_after": {k: {"value": dg.final.values.get(k), "std": dg.final.std.get(k)} for k in dg.base.names},
         "located_before": [s.as_dict() for s in dg.location_before.significant],
-        "unexplained": [{"channel": s.channel, "where": s.where, "p_value": s.p_value,
-                         "effect": s.effect, "effect_sigma": s.effect_sigma} for s in dg.unexplained],
+        "unexplained": dg.unexplained_detail if dg.unexplained_detail is not None else [
+            {"channel": s.channel, "where": s.where, "p_value": s.p_value,
+             "effect": s.effect, "effect_sigma": s.effect_sigma} for s in dg.unexplained],
+        "refused_stand_ins": dg.refused,
         "selection": dg.steps,
         "tests": {"count": dg.location_before.tests, "threshold_p": dg.location_before.threshold},
     }

@@ -24,6 +24,7 @@ from motorid.physics.friction import CasePressureFriction, StribeckFriction
 from motorid.physics.hydrodynamic import HydrodynamicTorque
 from motorid.physics.leakage import TurbulentLeakage
 from motorid.physics.ripple import MisalignmentRipple
+from motorid.physics import sensors, spec_errors
 from motorid.physics.sensors import TorqueOffset
 from motorid.physics.viscosity import PressureViscosity
 
@@ -36,6 +37,8 @@ _ALL = (
     TorqueOffset(),
     CasePressureFriction(),
     PressureViscosity(),
+    *spec_errors.MECHANISMS,  # displacement_error, leak_phase
+    *sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, sensor_lag_<channel>
 )
 
 #: every mechanism by id (singletons)

@@ -1,11 +1,48 @@
-"""Sensor errors that look like physics: the torque transducer's zero offset (mechanism).
+"""Transducer errors: what the bench reads is not what the motor does.
+
+Mechanisms of the discrepancy catalog (issue 15) that model the *reading*, as
+an extension of the one model (their hooks change the channel a transducer
+reports, never the motor's physics):
+
+- ``flow_meter_gain_a``, ``flow_meter_gain_b``, ``flow_meter_gain_case``: one
+  flow meter reads (1 + g) times the true flow.  The bench's redundancy names
+  the meter: the mass balance Q_AN + Q_BN = Q_CN (Bartos 1992 Eq. 59-61) holds
+  for the motor whatever its parameters, so a gain on one meter breaks it by
+  g·Q of that meter alone; a port meter's error is ∝ the swept flow D ω/2π
+  (∝ speed, one port only), the case meter's ∝ the leakage (∝ ΔP/μ).
+- ``torque_meter_gain``: the torque transducer reads (1 + g)·T, in the running
+  torque and the held torque at breakaway.  In the torque alone it is the same
+  as a displacement error (both scale T_p, friction rescales into K_F, T_Fc…);
+  the flows tell them apart: a torque gain leaves every flow alone.
+- ``sensor_lag_torque``, ``sensor_lag_q_a``, ``sensor_lag_q_b``,
+  ``sensor_lag_q_case``: the transducer is a first-order filter
+  τ dy/dt + y = x of time constant τ.  At a steady speed every shaft-locked
+  ripple of the channel, a sum of harmonics cos(kθ) of the shaft angle, comes
+  through as cos(kθ) → (cos kθ + kωτ sin kθ)/(1 + (kωτ)²): its amplitude falls
+  as 1/√(1 + (kωτ)²) and it lags by atan(kωτ) of shaft angle.  The run's mean is
+  untouched, so a lag shows only in the ripple's size and phase against the
+  shaft order and the speed: nothing at low speed, the ripple flattened and
+  shifted at high speed.  The ripple the hook filters is the 1992 model's own:
+  the pressure torque D ΔP S(θ)/2n and swept flow D ω S(θ)/2n through the Fourier
+  series of S(θ) (:func:`port_sum_harmonics`), and the leakage harmonics K_L(θ).
+
+Zero offsets: a constant torque offset is :class:`TorqueOffset` (``torque_offset``);
+offsets that differ run to run are told from the motor by
+:mod:`motorid.discrepancy.unexplained` (they follow no operating variable).
 """
 
 from __future__ import annotations
 
+import math
+
+import jax.numpy as jnp
+
+from motorid import _jaxconfig  # noqa: F401
 from motorid.physics.base import CatalogMechanism, ParameterInfo
-
-
+from motorid.physics.flow import leakage_harmonics
+from motorid.units import RAD_S_PER_RPM
+#: shaft orders of S(θ) kept in the lagged ripple (harmonics above fall off as 1/k² and are filtered anyway)
+PORT_SUM_HARMONICS = 24
 
 class TorqueOffset(CatalogMechanism):
     """Torque transducer zero offset [N·m]: +T0 on every torque reading.
@@ -41,3 +78,202 @@ class TorqueOffset(CatalogMechanism):
         word = "high" if t0 >= 0 else "low"
         return (f"the torque transducer reads {abs(t0):.3g} N·m {word} in both directions of rotation "
                 "and at breakaway (zero offset)")
+
+
+_METER_WORDS = {"q_a": "port A flow meter", "q_b": "port B flow meter", "q_case": "case-drain flow meter",
+                "torque": "torque transducer"}
+_SUFFIX = {"q_a": "a", "q_b": "b", "q_case": "case"}
+
+
+def port_sum_harmonics(pistons: int, count: int = PORT_SUM_HARMONICS) -> list[tuple[int, float]]:
+    """Fourier series of S(θ) = n/π + Σ_k c_k cos(kθ): the first ``count`` pairs (k, c_k) [-].
+
+    One piston contributes max(cos θ, 0) = 1/π + cos θ/2 + Σ_{k even} (2/π) cos(kπ/2)/(1 − k²) cos kθ;
+    summed over the n pistons θᵢ = θ + 2π(i−1)/n only the orders k that n divides survive, times n.
+    """
+    out, k = [], 2
+    while len(out) < count:
+        if k % pistons == 0 and k % 2 == 0:
+            out.append((k, pistons * (2.0 / math.pi) * math.cos(k * math.pi / 2.0) / (1.0 - k * k)))
+        k += 1
+    return out
+
+
+def lag_change(k, theta, speed, tau, phase=0.0):
+    """First-order lag of cos(kθ + phase) and sin(kθ + phase) at steady speed, minus the unlagged [-].
+
+    With x = kωτ: cos → (cos + x sin)/(1 + x²), sin → (sin − x cos)/(1 + x²).
+    returns (Δcos, Δsin).
+    """
+    x = k * speed * tau
+    c, s = jnp.cos(k * theta + phase), jnp.sin(k * theta + phase)
+    den = 1.0 + x * x
+    return (x * s - x * x * c) / den, (-x * c - x * x * s) / den
+
+
+def lagged_port_sum_change(theta, speed, tau, pistons: int, port_sum=None):
+    """S_lag(θ) − S(θ): what a first-order lag τ takes from the ripple of S at speed ω [-].
+
+    The first :data:`PORT_SUM_HARMONICS` orders exactly; the rest of S (its kinks' 1/k² tail,
+    S − n/π − Σ c_k cos kθ) scaled by the lag's cosine factor −x²/(1 + x²) at the first order left
+    out (that tail's orders are filtered at least as much).
+    """
+    from motorid.physics.kinematics import port_a_sum
+
+    harmonics = port_sum_harmonics(pistons)
+    total, kept = 0.0, pistons / math.pi
+    for k, c in harmonics:
+        total = total + c * lag_change(k, theta, speed, tau)[0]
+        kept = kept + c * jnp.cos(k * theta)
+    s = port_a_sum(theta, pistons) if port_sum is None else port_sum
+    k_next = harmonics[-1][0] + (pistons if pistons % 2 == 0 else 2 * pistons)
+    x = k_next * speed * tau
+    return total - (s - kept) * x * x / (1.0 + x * x)
+
+
+def lagged_leakage_change(theta, speed, tau, params, pistons: int):
+    """K_L(θ)_lag − K_L(θ): the lag's change of the leakage coefficient's harmonics [m³]."""
+    m = sum(1 for k in params if k.startswith("KL_a"))
+    a, b = leakage_harmonics(params, m)
+    total = 0.0
+    for order, (am, bm) in enumerate(zip(a, b), start=1):
+        dc, ds = lag_change(order * pistons, theta, speed, tau)
+        total = total + am * dc + bm * ds
+    return params["KL0"] * total
+
+
+class MeterGain(CatalogMechanism):
+    """A transducer reading (1 + g) times the true value of one channel [-]."""
+
+    single_start = True  # linear in g: one start of the fit is enough
+
+    def __init__(self, channel: str):
+        self.channel = channel
+        word = _METER_WORDS[channel]
+        if channel == "torque":
+            self.id = "torque_meter_gain"
+            self.channels = ("torque", "breakaway")
+            self.signature = ("running and held torque in proportion to the torque itself: ∝ ΔP in both "
+                              "directions (in the torque alone like a displacement error or a change of K_F), "
+                              "while every flow, and the flows' mass balance, agrees with the model")
+            self.reference = ("ISO 4392-1:2002 and ISO 9110-1:1990 (measurement accuracy classes of hydraulic "
+                              "test benches); E. O. Doebelin, 'Measurement Systems: Application and Design', "
+                              "5th ed., McGraw-Hill, 2004 (calibration, sensitivity error)")
+            self.physics = ("The torque transducer's sensitivity differs from its calibration certificate, from a "
+                            "bridge supply, an amplifier gain or a calibration lever that is off. "
+                            "Every torque reading, running or held at breakaway, is then off by the same fraction "
+                            "of itself, while the flows and the motor are as the model says.")
+            unit_words = "torque"
+        else:
+            self.id = f"flow_meter_gain_{_SUFFIX[channel]}"
+            self.channels = (channel,)
+            # the mass balance ties the three meters: the base fit spreads one meter's error over all flows
+            self.shows_in = ("q_a", "q_b", "q_case")
+            if channel == "q_case":
+                self.signature = ("case-drain flow in proportion to itself (∝ the leakage, ΔP/μ), while the port "
+                                  "flows agree: the mass balance Q_A + Q_B = Q_case breaks by g·Q_case, seen at low "
+                                  "speed where the port flows carry the leakage")
+            else:
+                other = "B" if channel == "q_a" else "A"
+                self.signature = (f"{word[:6]} flow in proportion to itself, mostly ∝ the swept flow Dω/2π (∝ speed), "
+                                  f"with no matching change in port {other} or the case drain: the mass balance "
+                                  "breaks by g·Q of this meter (a displacement error would move both ports, "
+                                  "opposite in sign)")
+            self.reference = ("ISO 4392-1:2002 and ISO 9110-1:1990 (measurement accuracy of hydraulic test "
+                              "benches); ISO 4185:1980 (measurement of liquid flow, weighing method: meter "
+                              "calibration)")
+            self.physics = (f"The {word}'s calibration factor (its K-factor, volume per pulse) differs from the "
+                            "one the DAQ applies, from wear, another oil's viscosity or a wrong data sheet. "
+                            "Its reading is then off by the same fraction of the flow it meters, and no other "
+                            "meter shares the error, so the flows no longer add up.")
+            unit_words = "flow"
+        self.name = f"{word} gain error"
+        self.parameters = {f"{self.id}.g": ParameterInfo(
+            "-", f"relative gain error of the {word}: reading = (1 + g)·true {unit_words}", False, 0.01)}
+
+    def running(self, params, spec, samples, ch):
+        g = self.param(params, "g")
+        return ch._replace(**{self.channel: getattr(ch, self.channel) * (1.0 + g)})
+
+    def breakaway_reading(self, params, spec, events, held):
+        if self.channel != "torque":
+            return held
+        return held * (1.0 + self.param(params, "g"))
+
+    def describe(self, values, spec=None) -> str:
+        g = self.value(values, "g")
+        word = _METER_WORDS[self.channel]
+        return f"the {word} reads {100 * abs(g):.3g} % {'high' if g >= 0 else 'low'} (gain {1 + g:.5g})"
+
+
+class SensorLag(CatalogMechanism):
+    """A transducer that is a first-order filter of time constant τ [s] on one channel."""
+
+    def __init__(self, channel: str):
+        self.channel = channel
+        word = _METER_WORDS[channel]
+        self.id = f"sensor_lag_{channel}"
+        self.name = f"{word} lag (first-order filter)"
+        self.channels = (channel,)
+        self.parameters = {f"{self.id}.tau": ParameterInfo(
+            "s", f"time constant τ of the {word}'s first-order response", True,
+            2e-3 if channel == "torque" else 5e-4)}
+        ripple = {"torque": "the pressure-torque ripple at the piston order",
+                  "q_a": "the swept-flow and leakage ripple at the piston order",
+                  "q_b": "the swept-flow and leakage ripple at the piston order",
+                  "q_case": "the leakage ripple K_L(θ) at the piston order"}[channel]
+        self.signature = (f"{_channel_words(channel)} vs shaft angle: {ripple} is smaller and later than the "
+                          "model's in proportion to the shaft order times speed (amplitude 1/√(1+(kωτ)²), lag "
+                          "atan(kωτ)): exact at low speed, flattened and shifted at high speed; run means untouched")
+        self.reference = ("E. O. Doebelin, 'Measurement Systems: Application and Design', 5th ed., McGraw-Hill, "
+                          "2004 (first-order instruments: time constant, amplitude ratio and phase); ISO 4392-1:2002 "
+                          "(instrument response in motor tests)")
+        self.physics = (f"The {word} does not follow fast changes: its reading relaxes toward the true value with a "
+                        "time constant τ, from its mechanics, its electronics or the DAQ's anti-alias filter. "
+                        "The shaft-locked ripple, whose frequency is the shaft order times the speed, is then "
+                        "flattened and delayed more the faster the shaft turns, while slow runs and run means read "
+                        "true.")
+
+    def _change(self, params, spec, s, tau):
+        n, D = spec.pistons, spec.displacement
+        if self.channel == "torque":
+            return D * (s.p_a - s.p_b) / (2.0 * n) * lagged_port_sum_change(s.theta, s.speed, tau, n, s.port_sum)
+        swept = D * s.speed / (2.0 * n) * lagged_port_sum_change(s.theta, s.speed, tau, n, s.port_sum)
+        leak_a = lagged_leakage_change(s.theta, s.speed, tau, params, n) * (s.p_a - s.p_case) / s.viscosity
+        leak_b = lagged_leakage_change(s.theta - spec.phase, s.speed, tau, params, n) * (s.p_b - s.p_case) / s.viscosity
+        if self.channel == "q_a":
+            return swept + leak_a
+        if self.channel == "q_b":
+            return -swept + leak_b
+        return leak_a + leak_b
+
+    def running(self, params, spec, samples, ch):
+        tau = self.param(params, "tau")
+        return ch._replace(**{self.channel: getattr(ch, self.channel) + self._change(params, spec, samples, tau)})
+
+    def neutral(self) -> dict:
+        return {f"{self.id}.tau": 0.0}
+
+    def describe(self, values, spec=None) -> str:
+        tau = self.value(values, "tau")
+        word = _METER_WORDS[self.channel]
+        text = f"the {word} lags with a time constant of {tau * 1e3:.3g} ms"
+        if spec is not None:
+            k = 2 * spec.pistons if spec.pistons % 2 else spec.pistons
+            w = 1000 * RAD_S_PER_RPM
+            x = k * w * tau
+            text += (f": at 1000 rpm its {k}× shaft-order ripple reads {100 / math.sqrt(1 + x * x):.3g} % of its "
+                     f"size, {math.degrees(math.atan(x)) / k:.3g}° of shaft angle late")
+        return text
+
+
+def _channel_words(channel: str) -> str:
+    return {"torque": "running torque", "q_a": "port A flow", "q_b": "port B flow",
+            "q_case": "case-drain flow"}[channel]
+
+
+MECHANISMS = (
+    MeterGain("q_a"), MeterGain("q_b"), MeterGain("q_case"), MeterGain("torque"),
+    SensorLag("torque"), SensorLag("q_a"), SensorLag("q_b"), SensorLag("q_case"),
+)
+

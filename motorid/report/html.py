@@ -708,7 +708,10 @@ def _discrepancy(rd: ReportData) -> str:
     if fig is not None:
         body.append('<h3>Residuals before and after</h3><p>Residual over the noise level of each sample, '
                     'grey with the 1992 model alone, blue with the mechanisms found added.</p>' + fig.img)
-    body.append(f"<h3>Unexplained</h3>{_unexplained(dg.get('unexplained'))}")
+    from motorid.report.causes import refused_words, unexplained_words  # issue 15
+
+    body.append(f"<h3>Unexplained</h3>{unexplained_words(dg.get('unexplained'))}"
+                f"{refused_words(dg.get('refused_stand_ins'))}{_unexplained(dg.get('unexplained'))}")
     rest = {k: v for k, v in dg.items() if k not in ("mismatch", "mechanisms", "residual_rms", "channels",
                                                      "unexplained")}
     if rest:

@@ -31,6 +31,12 @@ VALUES = {
     "torque_offset.T0": 1.7,
     "case_pressure_friction.K_c": 0.05,
     "pressure_viscosity.alpha": 1.5e-8,
+    # spec errors and transducers (issue 15)
+    "displacement_error.eps": 0.02, "leak_phase.dphi": 0.15,
+    "flow_meter_gain_a.g": 0.01, "flow_meter_gain_b.g": -0.012, "flow_meter_gain_case.g": 0.03,
+    "torque_meter_gain.g": -0.008,
+    "sensor_lag_torque.tau": 2e-3, "sensor_lag_q_a.tau": 5e-3, "sensor_lag_q_b.tau": 4e-3,
+    "sensor_lag_q_case.tau": 3e-3,
 }
 REQUIRED = ["stribeck_friction", "hydrodynamic_torque", "turbulent_leakage", "compressibility_flow",
             "misalignment_ripple", "torque_offset"]

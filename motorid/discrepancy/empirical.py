@@ -1,0 +1,287 @@
+"""Empirical terms: a readable formula for structure that no catalog mechanism explains.
+
+A library of physically shaped candidate terms (in the spirit of pysindy: the
+library is kept apart from the optimizer, so a selected term prints as
+physics) is regressed on a channel's residuals after the final fit:
+
+- speed factors 1, sgn ω, ω, ω|ω|, sgn ω·√|ω|;
+- pressure factors 1, ΔP, |ΔP|, √|ΔP|, P_A+P_B, P_A−P_c, P_B−P_c,
+  (P_A−P_c)(P_B−P_c), ΔP², (P_A+P_B)²;
+- viscosity factors 1, μ, 1/μ;
+- shaft-order harmonics cos kθ, sin kθ (k = 1…4, n, 2n), alone and × ΔP;
+
+every product of one factor of each kind is a term.  The 1992 model's own
+shapes (sgn ω, sgn ω·(P_A+P_B), μω for the torque; (P−P_c)/μ and ΔP/μ for the
+flows) are carried as unpenalized nuisance columns, so a term cannot be a
+base parameter in disguise.  Selection is forward stepwise regression with
+held-out selection (a greedy relative of the sparse regressions of pysindy,
+Brunton, Proctor & Kutz, PNAS 113, 3932, 2016, which on this strongly
+collinear library picks the physical term where thresholding the full least-
+squares solution does not): at each step the terms that best explain what the
+current columns leave are screened, and the one that most lowers the χ² of
+runs held out of the fit (K-fold over runs) is kept if it lowers it by at least
+:data:`MIN_STEP_GAIN` of the base χ² — a term must pay for itself on runs it
+was not fitted on — at most :data:`MAX_TERMS` terms.  The chosen term is then checked where it was
+not fitted: fit on the low half of the speeds, predict the high half, and the
+other way round; the same over ΔP.  It is printed with its units and labelled
+as an empirical term, never as a named mechanism.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MAX_TERMS = 3
+#: a term must lower the held-out χ² by at least this fraction of the base model's
+MIN_STEP_GAIN = 0.01
+
+_CH_UNIT = {"torque": ("N·m", {}), "q_a": ("m³/s", {}), "q_b": ("m³/s", {}), "q_case": ("m³/s", {})}
+_CH_SYMBOL = {"torque": "ΔT", "q_a": "ΔQ_A", "q_b": "ΔQ_B", "q_case": "ΔQ_case"}
+_ENG = {"torque": ("N·m", 1.0), "q_a": ("L/min", 6e4), "q_b": ("L/min", 6e4), "q_case": ("L/min", 6e4)}
+
+
+@dataclass(frozen=True)
+class Factor:
+    """One factor of a library term: its formula, its dimension (exponents of Pa and s) and values."""
+
+    text: str
+    pa: float
+    s: float
+    fn: object  # Samples → array
+
+
+def _speed_factors():
+    return [Factor("", 0, 0, lambda x: np.ones_like(x.speed)),
+            Factor("sgn ω", 0, 0, lambda x: np.asarray(x.direction, float)),
+            Factor("ω", 0, -1, lambda x: x.speed),
+            Factor("ω|ω|", 0, -2, lambda x: x.speed * np.abs(x.speed)),
+            Factor("sgn ω·√|ω|", 0, -0.5, lambda x: np.asarray(x.direction, float) * np.sqrt(np.abs(x.speed)))]
+
+
+def _pressure_factors():
+    return [Factor("", 0, 0, lambda x: np.ones_like(x.speed)),
+            Factor("ΔP", 1, 0, lambda x: x.p_a - x.p_b),
+            Factor("|ΔP|", 1, 0, lambda x: np.abs(x.p_a - x.p_b)),
+            Factor("√|ΔP|", 0.5, 0, lambda x: np.sqrt(np.abs(x.p_a - x.p_b))),
+            Factor("(P_A+P_B)", 1, 0, lambda x: x.p_a + x.p_b),
+            Factor("(P_A−P_c)", 1, 0, lambda x: x.p_a - x.p_case),
+            Factor("(P_B−P_c)", 1, 0, lambda x: x.p_b - x.p_case),
+            Factor("(P_A−P_c)(P_B−P_c)", 2, 0, lambda x: (x.p_a - x.p_case) * (x.p_b - x.p_case)),
+            Factor("ΔP²", 2, 0, lambda x: (x.p_a - x.p_b) ** 2),
+            Factor("(P_A+P_B)²", 2, 0, lambda x: (x.p_a + x.p_b) ** 2)]
+
+
+def _viscosity_factors():
+    return [Factor("", 0, 0, lambda x: np.ones_like(x.speed)),
+            Factor("μ", 1, 1, lambda x: x.viscosity),
+            Factor("/μ", -1, -1, lambda x: 1.0 / x.viscosity)]
+
+
+def _harmonic_factors(pistons: int):
+    out = []
+    for k in sorted({1, 2, 3, 4, pistons, 2 * pistons}):
+        for trig, f in (("cos", np.cos), ("sin", np.sin)):
+            kk = "" if k == 1 else str(k)
+            out.append(Factor(f"{trig} {kk}θ", 0, 0, (lambda f, k: lambda x: f(k * x.theta))(f, k)))
+    return out
+
+
+@dataclass(frozen=True)
+class Term:
+    """A library term: the product of its factors."""
+
+    factors: tuple
+
+    @property
+    def text(self) -> str:
+        parts = [f.text for f in self.factors if f.text and f.text != "/μ"]
+        out = "·".join(parts) or "1"
+        return out + "/μ" if any(f.text == "/μ" for f in self.factors) else out
+
+    @property
+    def dims(self) -> tuple[float, float]:
+        return sum(f.pa for f in self.factors), sum(f.s for f in self.factors)
+
+    def values(self, x):
+        v = np.ones_like(np.asarray(x.speed, float))
+        for f in self.factors:
+            v = v * f.fn(x)
+        return v
+
+
+def library(pistons: int) -> list[Term]:
+    """Every candidate term (see module doc), without the constant."""
+    terms = []
+    for a in _speed_factors():
+        for b in _pressure_factors():
+            for c in _viscosity_factors():
+                if a.text or b.text or c.text:
+                    terms.append(Term((a, b, c)))
+    for h in _harmonic_factors(pistons):
+        terms.append(Term((h,)))
+        terms.append(Term((h, _pressure_factors()[1])))
+    return terms
+
+
+def nuisance(channel: str, x, spec) -> np.ndarray:
+    """Columns of the 1992 model's own shapes in this channel (left unpenalized)."""
+    d = np.asarray(x.direction, float)
+    if channel == "torque":
+        cols = [d, d * (x.p_a + x.p_b), x.viscosity * x.speed]
+    elif channel == "q_a":
+        cols = [(x.p_a - x.p_case) / x.viscosity, (x.p_a - x.p_b) / x.viscosity]
+    elif channel == "q_b":
+        cols = [(x.p_b - x.p_case) / x.viscosity, (x.p_a - x.p_b) / x.viscosity]
+    else:
+        cols = [(x.p_a + x.p_b - 2 * x.p_case) / x.viscosity]
+    return np.column_stack([np.ones_like(d)] + cols)
+
+
+def _unit(channel: str, dims) -> str:
+    """Unit of a coefficient: channel unit / term dimension (Pa^a s^b)."""
+    base = _CH_UNIT[channel][0]
+    pa, s = -dims[0], -dims[1]
+    if channel != "torque":  # m³/s · s^b
+        s = s - 1
+        base = "m³"
+    num, den = [base], []
+
+    def put(sym, e):
+        if e == 0:
+            return
+        txt = sym if abs(e) == 1 else f"{sym}^{abs(e):g}"
+        (num if e > 0 else den).append(txt)
+
+    put("Pa", pa)
+    put("s", s)
+    unit = "·".join(num)
+    if den:
+        unit += "/" + ("·".join(den) if len(den) == 1 else "(" + "·".join(den) + ")")
+    return unit
+
+
+@dataclass
+class EmpiricalTerm:
+    """A proposed empirical term of one channel (never a named mechanism)."""
+
+    channel: str
+    terms: list  # [(Term, coefficient SI)]
+    held_out_gain: float  # fraction of the held-out residual χ² (over the base) it removes, K-fold over runs
+    region_gain: dict = field(default_factory=dict)  # split → fraction removed where not fitted
+    size: float = 0.0  # RMS of the term over the data [SI]
+
+    @property
+    def formula(self) -> str:
+        parts = []
+        for t, c in self.terms:
+            parts.append(f"{c:+.3g} {_unit(self.channel, t.dims)} · {t.text}")
+        return f"{_CH_SYMBOL[self.channel]} ≈ " + " ".join(parts).lstrip("+")
+
+    def as_dict(self) -> dict:
+        unit, f = _ENG[self.channel]
+        return {"label": "empirical term (not a named mechanism)", "channel": self.channel,
+                "formula": self.formula,
+                "terms": [{"term": t.text, "coefficient": c, "unit": _unit(self.channel, t.dims)} for t, c in self.terms],
+                "size_rms": self.size, "size_words": f"{self.size * f:.3g} {unit} RMS over the logged points",
+                "held_out_gain": self.held_out_gain, "region_gain": self.region_gain}
+
+
+def _cv_sse(Z, y, cols, fold, folds: int) -> float:
+    """Sum of squared held-out residuals, K-fold over runs, of least squares on columns ``cols``."""
+    total = 0.0
+    for f in range(folds):
+        tr = fold != f
+        b = np.linalg.lstsq(Z[tr][:, cols], y[tr], rcond=None)[0]
+        total += float(np.sum((y[~tr] - Z[~tr][:, cols] @ b) ** 2))
+    return total
+
+
+def _forward(Z, y, k_free: int, fold, folds: int, max_terms: int = MAX_TERMS, screen: int = 6):
+    """Forward stepwise selection: at each step the library terms that best explain what the
+    current columns leave (after projecting those columns out) are screened, the one with the
+    smallest held-out χ² is taken if it lowers it by at least MIN_STEP_GAIN.  Returns the chosen
+    column indices and the held-out χ² before and after."""
+    cols = list(range(k_free))
+    base = cur = _cv_sse(Z, y, cols, fold, folds)
+    chosen: list[int] = []
+    lib = np.arange(k_free, Z.shape[1])
+    norms0 = np.sqrt(np.sum(Z[:, lib] ** 2, axis=0))
+    for _ in range(max_terms):
+        Q, _r = np.linalg.qr(Z[:, cols])
+        r = y - Q @ (Q.T @ y)
+        Zc = Z[:, lib] - Q @ (Q.T @ Z[:, lib])
+        norm = np.sqrt(np.sum(Zc**2, axis=0))
+        usable = (norm > 1e-6 * norms0) & ~np.isin(lib, chosen)
+        score = np.where(usable, (Zc.T @ r) ** 2 / np.where(usable, norm**2, 1.0), -np.inf)
+        best, best_cv = None, cur
+        for j in np.argsort(-score)[:screen]:
+            if not np.isfinite(score[j]):
+                continue
+            cv = _cv_sse(Z, y, cols + [int(lib[j])], fold, folds)
+            if cv < best_cv:
+                best, best_cv = int(lib[j]), cv
+        if best is None or best_cv > cur - MIN_STEP_GAIN * base:
+            break
+        chosen.append(best)
+        cols.append(best)
+        cur = best_cv
+    return chosen, base, cur
+
+
+def _design(channel, x, spec, terms):
+    N = nuisance(channel, x, spec)
+    L = np.column_stack([t.values(x) for t in terms])
+    return N, L
+
+
+def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regions: dict | None = None):
+    """The sparsest library term that explains ``residual`` on held-out runs, or None.
+
+    x : Samples (numpy) of the channel's inlier samples; residual, sigma [SI]; run_of : run index per sample.
+    regions : name → boolean mask (True: first part) for the where-not-fitted check.
+    """
+    terms = library(spec.pistons)
+    N, L = _design(channel, x, spec, terms)
+    w = 1.0 / np.asarray(sigma, float)
+    y = np.asarray(residual, float) * w
+    X = np.column_stack([N, L]) * w[:, None]
+    ok = np.all(np.isfinite(X), axis=1) & np.isfinite(y)
+    X, y, run_of = X[ok], y[ok], np.asarray(run_of)[ok]
+    scale = np.sqrt(np.mean(X**2, axis=0))
+    scale[scale == 0] = 1.0
+    Z = X / scale
+    k = N.shape[1]
+    runs = np.unique(run_of)
+    if runs.size < 2 * folds:
+        return None
+    fold_of = {r: i % folds for i, r in enumerate(runs)}
+    fold = np.array([fold_of[r] for r in run_of])
+
+    chosen_idx, base, best = _forward(Z, y, k, fold, folds)
+    if not chosen_idx:
+        return None
+    cols = list(range(k)) + chosen_idx
+    beta = np.zeros(Z.shape[1])
+    beta[cols] = np.linalg.lstsq(Z[:, cols], y, rcond=None)[0]
+    beta = beta / scale * 1.0
+    chosen = [(terms[i - k], float(beta[i])) for i in chosen_idx]
+    # coefficients in SI: the columns were divided by σ (weights) and by their RMS (scale)
+    size = float(np.sqrt(np.mean((L[ok][:, [i - k for i in chosen_idx]] @ beta[chosen_idx]) ** 2)))
+    gain = 1.0 - best / base if base > 0 else 0.0
+    region_gain = {}
+    idx = list(chosen_idx)
+    for name, mask in (regions or {}).items():
+        m = np.asarray(mask)[ok]
+        for tr_mask, label in ((m, f"fit on {name[0]}, predict {name[1]}"), (~m, f"fit on {name[1]}, predict {name[0]}")):
+            te_mask = ~tr_mask
+            if tr_mask.sum() < 10 or te_mask.sum() < 10:
+                continue
+            cols = list(range(k)) + idx
+            b_with = np.linalg.lstsq(Z[tr_mask][:, cols], y[tr_mask], rcond=None)[0]
+            b_without = np.linalg.lstsq(Z[tr_mask][:, :k], y[tr_mask], rcond=None)[0]
+            r_with = float(np.sum((y[te_mask] - Z[te_mask][:, cols] @ b_with) ** 2))
+            r_without = float(np.sum((y[te_mask] - Z[te_mask][:, :k] @ b_without) ** 2))
+            region_gain[label] = 1.0 - r_with / r_without if r_without > 0 else 0.0
+    return EmpiricalTerm(channel, chosen, float(gain), region_gain, size)

@@ -1,0 +1,168 @@
+"""Honest unknowns: structure no catalog mechanism explains, said in words and numbers.
+
+Two duties, hooked into :func:`motorid.discrepancy.select.diagnose`:
+
+1. :func:`extrapolation_check` — a candidate that the forward selection would
+   keep must also predict the operating regions it was not fitted on: the
+   model (with the candidate) is fitted on the runs of the low half of the
+   speeds and predicts the high half, and the other way round; the same over
+   the pressure difference.  A mechanism that is the motor's physics predicts
+   the other half as well as a fit on all runs does; a stand-in that bends
+   itself to the structure of one half does not.  Where the runs span more than
+   5 °C of oil temperature, the same split over the temperature (a law in 1/μ
+   and a stand-in ∝ ΔP/μ part there).  The candidate is refused when
+   the held-out χ² of some split exceeds that of the all-runs fit on the same
+   samples by more than ``max(MIN_EXCESS, EXCESS_FRACTION·χ²)``.
+2. :func:`unexplained_entries` — what stays located after the selection, one
+   entry per channel: the variables it follows, its size (engineering units and
+   in noise levels), its shape (rising or falling along the variable, a shaft
+   order, a spread from run to run that no operating variable follows — a zero
+   offset that changes between runs), and an empirical term proposed by
+   :mod:`motorid.discrepancy.empirical`, labelled as such.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT
+from motorid.identify.least_squares import fit_least_squares
+from motorid.identify.types import FitOptions
+
+MIN_EXCESS = 50.0
+EXCESS_FRACTION = 0.1
+
+
+def region_masks(dataset) -> dict:
+    """Run-level halves: ``{(low words, high words): bool per run (True = low half)}``: speed, ΔP, oil temperature."""
+    runs = dataset.runs
+    out = {}
+    moving = np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)) > 0
+    for var, col, unit, f in (("speed", "speed_median_rad_s", "rpm", 60 / (2 * np.pi)),
+                              ("pressure difference", "dp_median_Pa", "bar", 1e-5),
+                              ("oil temperature", "temp_median_C", "°C", 1.0)):
+        v = np.abs(runs[col].to_numpy(dtype=float))
+        if var == "oil temperature" and np.nanmax(v[moving]) - np.nanmin(v[moving]) < 5.0:
+            continue  # one oil temperature (within a drift): no split
+        ok = moving & np.isfinite(v)
+        if np.unique(np.round(v[ok], 6)).size < 2:
+            continue
+        cut = np.median(v[ok])
+        low = v <= cut
+        if low[ok].all():
+            low = v < cut
+        if not low[ok].any() or low[ok].all():
+            continue
+        out[(f"{var} up to {cut * f:.3g} {unit}", f"{var} above {cut * f:.3g} {unit}")] = low
+    return out
+
+
+def _sample_masks(dataset, run_low):
+    run_of = np.asarray(dataset.run_of_sample, dtype=int)
+    ev = np.asarray(getattr(dataset, "run_of_event", np.zeros(0, int)), dtype=int)
+    return run_low[run_of], run_low[ev] if ev.size else np.zeros(0, bool)
+
+
+def _chi2(fit, inliers, noise, dataset, samples_mask, events_mask) -> float:
+    run_of = np.asarray(dataset.run_of_sample, dtype=int)
+    total = 0.0
+    for c, mask in inliers.items():
+        sel = mask & (events_mask if c == "breakaway" else samples_mask)
+        if not sel.any():
+            continue
+        sig = np.full(mask.shape, noise[c]) if c == "breakaway" else np.asarray(noise[c])[run_of]
+        r = fit.residuals[c][sel] / np.broadcast_to(sig, mask.shape)[sel]
+        total += float(np.sum(np.minimum(r**2, 25.0)))
+    return total
+
+
+def extrapolation_check(dataset, spec, mechanisms, noise, inliers, full_fit) -> dict:
+    """Fit on one half of the speeds (of ΔP), predict the other; compare with the all-runs fit.
+
+    Returns ``{"passed": bool, "splits": [{split, held_out_chi2, all_runs_chi2, excess}]}``.
+    """
+    splits, passed = [], True
+    for (low_words, high_words), run_low in region_masks(dataset).items():
+        s_low, e_low = _sample_masks(dataset, run_low)
+        for train_low, label in ((True, f"fit on {low_words}, predict {high_words}"),
+                                 (False, f"fit on {high_words}, predict {low_words}")):
+            s_tr = s_low if train_low else ~s_low
+            e_tr = e_low if train_low else ~e_low
+            keep = {c: m & (e_tr if c == "breakaway" else s_tr) for c, m in inliers.items()}
+            fit = fit_least_squares(dataset, spec, mechanisms,
+                                    FitOptions(fixed_noise=noise, fixed_inliers=keep), initial=full_fit.params_all)
+            held = _chi2(fit, inliers, noise, dataset, ~s_tr, ~e_tr)
+            ref = _chi2(full_fit, inliers, noise, dataset, ~s_tr, ~e_tr)
+            excess = held - ref
+            bad = excess > max(MIN_EXCESS, EXCESS_FRACTION * ref)
+            passed = passed and not bad
+            splits.append({"split": label, "held_out_chi2": held, "all_runs_chi2": ref, "excess": excess,
+                           "failed": bool(bad)})
+    return {"passed": passed, "splits": splits}
+
+
+def _shape(structures) -> str:
+    """Words on the shape of a channel's structures."""
+    words = []
+    for s in structures:
+        if s.variable == "shaft angle" and s.order:
+            words.append(f"a ripple at the {s.order}× shaft order")
+        elif s.variable == "time within run":
+            words.append("a drift within runs")
+        elif s.groups and s.variable not in ("run", "protocol", "direction"):
+            means = [g[1] for g in s.groups]
+            if len(means) >= 3:
+                d = np.diff(means)
+                if np.all(d >= 0):
+                    words.append(f"rising with {s.variable}")
+                elif np.all(d <= 0):
+                    words.append(f"falling with {s.variable}")
+                else:
+                    words.append(f"not monotone in {s.variable}")
+        elif s.variable == "direction" and len(s.groups) == 2:
+            a, b = s.groups[0][1], s.groups[1][1]
+            words.append("of opposite sign in the two directions" if a * b < 0 else "of one sign in both directions")
+    return ", ".join(dict.fromkeys(words))
+
+
+def _fmt(v, channel):
+    unit, f = UNIT[channel]
+    return f"{v * f:.3g} {unit}"
+
+
+def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = True) -> list:
+    """One entry per channel with structure left: words, numbers and an empirical term where one holds."""
+    from motorid.discrepancy.empirical import propose
+
+    by_channel: dict = {}
+    for s in structures:
+        by_channel.setdefault(s.channel, []).append(s)
+    entries = []
+    regions = region_masks(dataset)
+    run_of = np.asarray(dataset.run_of_sample, dtype=int)
+    for c, group in by_channel.items():
+        group = sorted(group, key=lambda s: s.p_value)
+        variables = list(dict.fromkeys(s.variable for s in group))
+        big = max(group, key=lambda s: s.effect_sigma)
+        shape = _shape(group)
+        physical = [v for v in variables if v not in ("run", "protocol", "time within run")]
+        per_run = "run" in variables and not physical
+        if per_run:
+            shape = (shape + ", " if shape else "") + ("a spread from run to run that no operating variable "
+                                                       "follows (like a zero offset that changes between runs)")
+        text = (f"{CHANNEL_WORDS[c]} differs from the model along {', '.join(variables)}: up to "
+                f"{_fmt(abs(big.effect), c)} ({big.effect_sigma:.3g} noise levels)" + (f"; {shape}" if shape else ""))
+        entry = {"channel": c, "where": group[0].where, "p_value": group[0].p_value, "effect": big.effect,
+                 "effect_sigma": big.effect_sigma, "variables": variables, "shape": shape, "description": text,
+                 "structures": [s.where for s in group], "empirical_term": None}
+        if propose_terms and c != "breakaway" and c in final.residuals:
+            ok = np.asarray(final.inliers[c]) & np.isfinite(final.residuals[c])
+            x = type(dataset.running)(*[np.asarray(f)[ok] if np.ndim(f) else f for f in dataset.running])
+            masks = {k: np.asarray(v)[run_of][ok] for k, v in regions.items()}
+            term = propose(c, x, np.asarray(final.residuals[c])[ok], np.asarray(final.sigma[c])[ok], run_of[ok],
+                           spec, regions=masks)
+            if term is not None and term.held_out_gain > 0.05:
+                entry["empirical_term"] = term.as_dict()
+                entry["description"] += f". Proposed empirical term (not a named mechanism): {term.formula}"
+        entries.append(entry)
+    return entries

@@ -1,0 +1,133 @@
+"""Spec errors: the motor data the model is given are not the motor's.
+
+Two mechanisms of the discrepancy catalog (issue 15), each an extension of the
+one model through its hooks (:mod:`motorid.physics.base`):
+
+- ``displacement_error``: the true displacement is D' = D·(1 + ε), D the spec's.
+  The pressure torque T_p = D ΔP S(θ)/2n (Bartos 1992 Eq. 7) and the swept flow
+  Q_A = D ω S(θ)/2n (Eq. 36) carry no fitted parameter, so a wrong D shows
+  there and only there: the torque gains ε·T_p (in the running torque and the
+  held torque at breakaway), port A gains ε·Q_A and port B loses as much, the
+  case drain nothing.  The other D-proportional terms (K_v D μ ω, K_F D(P_A+P_B),
+  K_FS) are absorbed by their coefficients, which are then relative to the
+  spec's D: divide them by 1 + ε for coefficients relative to the true D.
+- ``leak_phase``: the phase φ of K_LB(θ) = K_LA(θ − φ) (Eq. 55) is φ_spec + δφ,
+  φ_spec = π/n unless the spec sets it.  It moves the shaft-angle pattern of the
+  port-B-to-case leakage, so it shows in the case drain and port B flow
+  against shaft angle in the runs where port B holds the high pressure.
+
+Why the displacement error is not a torque gain (:mod:`motorid.physics.sensors`):
+in the torque the two are the same up to a rescaling of K_v, K_F, T_Fc, K_FS
+and K_s (both scale T_p, the friction rescales into its coefficients); the port
+flows tell them apart, as a displacement error puts ε·D ω/2π into port A and
+takes it from port B (opposite signs, ∝ ω, nothing in the case drain), and a
+torque gain puts nothing into any flow.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+
+from motorid import _jaxconfig  # noqa: F401
+from motorid.physics import flow, torque
+from motorid.physics.base import CatalogMechanism, ParameterInfo
+from motorid.physics.flow import leakage_harmonics
+
+
+
+class DisplacementError(CatalogMechanism):
+    """The motor's true displacement D' = D_spec·(1 + ε) [-].
+
+    ΔT = ε·T_p = ε·D ΔP S(θ)/2n (running and held torque);
+    ΔQ_AN = ε·D ω S(θ)/2n, ΔQ_BN = −ΔQ_AN, ΔQ_CN = 0 (Bartos 1992 Eq. 7, 36-37).
+    """
+
+    single_start = True  # linear in ε: one start of the fit is enough
+    id = "displacement_error"
+    name = "displacement differs from the spec"
+    physics = ("The motor's true displacement per revolution differs from the catalogue value in the motor spec "
+               "(tolerances of the swash angle and piston bores, a wrong data sheet, another size variant). "
+               "Torque per unit pressure and swept flow per unit speed then both differ by the same fraction, "
+               "so the flows into port A and out of port B grow with speed by equal and opposite amounts while "
+               "the case drain is untouched.")
+    reference = ("R. D. Bartos, 'Mathematical Modeling of Bent-Axis Hydraulic Piston Motors', JPL TDA Progress "
+                 "Report 42-111, 1992 (Eq. 6-7, 36-37); ISO 8426:2008, Hydraulic fluid power - Positive "
+                 "displacement pumps and motors - Determination of derived capacity")
+    channels = ("torque", "q_a", "q_b", "breakaway")
+    parameters = {
+        "displacement_error.eps": ParameterInfo(
+            "-", "relative displacement error: true D = spec D·(1 + ε)", False, 0.01),
+    }
+    signature = ("port flows vs speed: flow into port A off by ε·Dω/2π and out of port B by the same amount with "
+                 "the opposite sign, nothing in the case drain (a flow-meter gain would touch one meter only and "
+                 "break the mass balance); running and held torque off by ε·DΔP/2π, which in the torque alone "
+                 "looks like a change of K_F and T_Fc")
+
+    def _swept(self, spec, s):
+        return flow.swept_flow_a(s.theta, s.speed, spec.displacement, spec.pistons, port_sum=s.port_sum)
+
+    def _pressure_torque(self, spec, s):
+        return torque.pressure_torque(s.theta, s.p_a, s.p_b, spec.displacement, spec.pistons, port_sum=s.port_sum)
+
+    def running(self, params, spec, samples, ch):
+        eps = self.param(params, "eps")
+        q = eps * self._swept(spec, samples)
+        return ch._replace(torque=ch.torque + eps * self._pressure_torque(spec, samples),
+                           q_a=ch.q_a + q, q_b=ch.q_b - q)
+
+    def breakaway_reading(self, params, spec, events, held):
+        return held + self.param(params, "eps") * self._pressure_torque(spec, events)
+
+    def describe(self, values, spec=None) -> str:
+        eps = self.value(values, "eps")
+        if spec is not None:
+            d = spec.displacement * 1e6
+            return (f"the measured displacement is {d * (1 + eps):.4g} cm³/rev, {100 * eps:+.3g} % from the spec's "
+                    f"{d:.4g} cm³/rev (K_v, K_F, K_FS are relative to the spec's D)")
+        return f"the true displacement is {100 * eps:+.3g} % from the spec's (D' = D·(1 {'+' if eps >= 0 else '−'} {abs(eps):.3g}))"
+
+
+class LeakPhase(CatalogMechanism):
+    """Leakage phase φ of K_LB(θ) = K_LA(θ − φ) off the spec's by δφ [rad].
+
+    ΔQ_BN = ΔQ_CN = [K_L(θ − φ − δφ) − K_L(θ − φ)] (P_B − P_c)/μ (Eq. 53-55).
+    """
+
+    id = "leak_phase"
+    name = "leakage phase differs from the spec"
+    physics = ("The port-to-case leakage repeats every piston pitch, and port B's pattern is port A's shifted by a "
+               "phase φ set by the valve-plate geometry, taken as half a pitch (π/n) unless the spec says "
+               "otherwise. "
+               "A valve plate with other timing shifts port B's leakage pattern against the shaft angle.")
+    reference = ("R. D. Bartos, JPL TDA Progress Report 42-111, 1992 (Eq. 52-55); R. E. Johnson, 'Leakage in "
+                 "hydraulic motors as a function of shaft angle', 1980 (the seed's reference on K_L(θ))")
+    channels = ("q_b", "q_case")
+    shows_in = ("q_a", "q_b", "q_case")  # the shared K_L harmonics compromise between the ports
+    parameters = {
+        "leak_phase.dphi": ParameterInfo("rad", "leak phase φ minus the spec's (π/n by default)", False, 0.1),
+    }
+    signature = ("case-drain and port B flow vs shaft angle at the piston order, in the runs where port B holds "
+                 "the high pressure: the pattern is shifted against the one the spec's phase predicts; nothing "
+                 "where port A is the high-pressure port")
+
+    def running(self, params, spec, samples, ch):
+        s = samples
+        m = sum(1 for k in params if k.startswith("KL_a"))
+        a, b = leakage_harmonics(params, m)
+        dphi = self.param(params, "dphi")
+        k_old = flow.leakage_coefficient(s.theta - spec.phase, params["KL0"], a, b, spec.pistons)
+        k_new = flow.leakage_coefficient(s.theta - spec.phase - dphi, params["KL0"], a, b, spec.pistons)
+        dq = flow.port_to_case_leakage(k_new - k_old, s.p_b, s.p_case, s.viscosity)
+        return ch._replace(q_b=ch.q_b + dq, q_case=ch.q_case + dq)
+
+    def describe(self, values, spec=None) -> str:
+        d = self.value(values, "dphi")
+        if spec is not None:
+            return (f"port B's leakage pattern lies at φ = {math.degrees(spec.phase + d):.3g}° "
+                    f"(spec: {math.degrees(spec.phase):.3g}°, {math.degrees(d):+.3g}°)")
+        return f"port B's leakage pattern is shifted by {math.degrees(d):+.3g}° of shaft angle from the spec's phase"
+
+
+MECHANISMS = (DisplacementError(), LeakPhase())
