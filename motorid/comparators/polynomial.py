@@ -60,7 +60,7 @@ class Polynomial(LossModel):
             if ok.size == 0:
                 continue
             n_motor, n_pump = int(op.motor[ok].sum()), int((~op.motor[ok]).sum())
-            best = None
+            scores = []
             for k in ((self.fixed_degree,) if self.fixed_degree else DEGREES):
                 n_terms = (k + 1) * (k + 2) // 2
                 split = min(n_motor, n_pump) >= 2 * n_terms
@@ -72,11 +72,11 @@ class Polynomial(LossModel):
                     tr = np.setdiff1d(ok, f)
                     c = _lstsq(self._basis(op, k, split)[tr], target[tr])
                     sse += float(np.sum((self._basis(op, k, split)[f] @ c - target[f]) ** 2))
-                if best is None or sse < best[0]:
-                    best = (sse, (k, split))
-            if best is None:
-                best = (0.0, (1, False))
-            h = best[1]
+                scores.append((sse, (k, split)))
+            # the lowest degree within 1 % of the best held-out error (no extra terms for nothing)
+            floor = min(s for s, _ in scores) if scores else 0.0
+            tiny = 1e-20 * float(np.sum(target[ok] ** 2))  # round-off: a law the basis holds exactly
+            h = next((h for s, h in scores if s <= 1.01 * floor + tiny), (1, False))
             self.shape[key] = h
             self.coef[key] = _lstsq(self._basis(op, *h)[ok], target[ok])
         return self

@@ -118,6 +118,7 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
                                   jnp.asarray(table.p_b), jnp.asarray(disp))
         return jnp.stack([ch.torque, ch.q_a, ch.q_b, ch.q_case, ev, ehm, e])
 
+    outputs = jax.jit(outputs)
     base = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
     value = np.asarray(outputs(base))
     var = np.zeros_like(value)
@@ -131,7 +132,7 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
                 p[k] = base[k] + z[i] * std[i]
             return outputs(p)
 
-        J = np.asarray(jax.jacfwd(of_z)(jnp.zeros(len(names))))  # (7, N, k)
+        J = np.asarray(jax.jit(jax.jacfwd(of_z))(jnp.zeros(len(names))))  # (7, N, k)
         C = cov / np.outer(std, std)
         var = np.einsum("onk,kl,onl->on", J, C, J)
     # channels that lean on a parameter the fit did not identify: left empty

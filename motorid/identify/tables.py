@@ -5,9 +5,11 @@ is the one model, :func:`motorid.model.predict`, averaged over θ: the mean over
 :data:`THETA_POINTS` angles evenly spread over one piston pitch 2π/n.  Every
 term of the model repeats with the pitch (the pressure and swept terms
 through S(θ), K_L(θ) through its harmonics of order m·n), so this is the mean
-over a revolution; it is exact for the K_L(θ) harmonics (they average to
-zero) and for every term linear in S(θ) up to the quadrature error of S(θ)'s
-kinks, below 10⁻⁵ of the ripple with 64 angles.
+over a revolution.  It is made exact: the parameter-free S(θ) = Σ_{cos θᵢ>0} cos θᵢ,
+in which the pressure torque and the swept flow are linear, is given its exact
+mean n/π (so that they average to DΔP/2π and Dω/2π, Eq. 16, 43; a grid mean of
+S(θ)'s kinks would miss by 5·10⁻⁶ with 64 angles), and the K_L(θ) harmonics,
+trigonometric polynomials of order below 64 per pitch, average to zero exactly.
 
 What a table cannot identify is reported as such, never given a number:
 K_FS and K_s (no breakaway in a steady table), the K_L(θ) harmonics (no shaft
@@ -51,14 +53,17 @@ NO_ANGLE = ("an operating-point table holds means over shaft angle: the K_L(θ) 
 
 
 def table_samples(spec, table, points: int = THETA_POINTS):
-    """:class:`~motorid.model.Samples` of shape (points of the table, ``points`` angles over one pitch)."""
+    """:class:`~motorid.model.Samples` of shape (points of the table, ``points`` angles over one pitch),
+    S(θ) set to its exact mean n/π (see the module's words)."""
     pitch = 2.0 * np.pi / spec.pistons
     theta = pitch * (np.arange(points) + 0.5) / points
     n = len(table)
     col = lambda x: np.asarray(x, dtype=float)[:, None]  # noqa: E731
-    return model.make_samples(spec, np.broadcast_to(theta, (n, points)).copy(), col(table.speed), col(table.p_a),
-                              col(table.p_b), col(table.p_case), col(table.viscosity), acceleration=0.0,
-                              direction=np.sign(col(table.speed)), temperature=col(table.temperature))
+    s = model.make_samples(spec, np.broadcast_to(theta, (n, points)).copy(), col(table.speed), col(table.p_a),
+                           col(table.p_b), col(table.p_case), col(table.viscosity), acceleration=0.0,
+                           direction=np.sign(col(table.speed)), temperature=col(table.temperature))
+    # S(θ)'s exact mean over a revolution (MODEL.md: mean torque DΔP/2π = (D/2n)·ΔP·S̄)
+    return s._replace(port_sum=np.full_like(s.port_sum, spec.pistons / np.pi))
 
 
 def point_channels(params: dict, spec, samples, displacement=None, mechanisms: Sequence = ()) -> Channels:
