@@ -2,14 +2,14 @@
 
 A table point is a steady operating point averaged over shaft angle.  Its model
 is the one model, :func:`motorid.model.predict`, averaged over θ: the mean over
-:data:`THETA_POINTS` angles evenly spread over one piston pitch 2π/n.  Every
-term of the model repeats with the pitch (the pressure and swept terms
-through S(θ), K_L(θ) through its harmonics of order m·n), so this is the mean
-over a revolution.  It is made exact: the parameter-free S(θ) = Σ_{cos θᵢ>0} cos θᵢ,
+K angles evenly spread over a whole revolution (K = max(64, 2n(M+2)), M the order
+of the K_L(θ) series).  It is exact: the parameter-free S(θ) = Σ_{cos θᵢ>0} cos θᵢ,
 in which the pressure torque and the swept flow are linear, is given its exact
 mean n/π (so that they average to DΔP/2π and Dω/2π, Eq. 16, 43; a grid mean of
-S(θ)'s kinks would miss by 5·10⁻⁶ with 64 angles), and the K_L(θ) harmonics,
-trigonometric polynomials of order below 64 per pitch, average to zero exactly.
+S(θ)'s kinks would miss by 5·10⁻⁶ with 64 angles), and every other term that
+varies with θ is a trigonometric polynomial of order below K (the K_L(θ)
+harmonics of order m·n; a mechanism's shaft-order terms), whose grid mean is its
+exact mean.
 
 What a table cannot identify is reported as such, never given a number:
 K_FS and K_s (no breakaway in a steady table), the K_L(θ) harmonics (no shaft
@@ -42,7 +42,7 @@ from motorid.identify.least_squares import FitResult, coverage_reasons
 from motorid.model import Channels
 
 TABLE_CHANNELS = ("torque", "q_a", "q_b", "q_case")
-THETA_POINTS = 64  # shaft angles per piston pitch in the θ-average of a table point
+THETA_POINTS = 64  # at least this many shaft angles over a revolution in the θ-average of a table point
 NO_BREAKAWAY = ("an operating-point table holds running points only, no breakaway: static friction needs "
                 "startability runs (ISO 4392-2)")
 NO_ANGLE = ("an operating-point table holds means over shaft angle: the K_L(θ) harmonics need flows "
@@ -52,11 +52,12 @@ NO_ANGLE = ("an operating-point table holds means over shaft angle: the K_L(θ) 
 # ----------------------------------------------------------------------------- the θ-averaged model
 
 
-def table_samples(spec, table, points: int = THETA_POINTS):
-    """:class:`~motorid.model.Samples` of shape (points of the table, ``points`` angles over one pitch),
+def table_samples(spec, table, points: int | None = None):
+    """:class:`~motorid.model.Samples` of shape (points of the table, K angles over a revolution),
     S(θ) set to its exact mean n/π (see the module's words)."""
-    pitch = 2.0 * np.pi / spec.pistons
-    theta = pitch * (np.arange(points) + 0.5) / points
+    if points is None:
+        points = max(THETA_POINTS, 2 * spec.pistons * (spec.leak_harmonics + 2))
+    theta = 2.0 * np.pi * (np.arange(points) + 0.5) / points
     n = len(table)
     col = lambda x: np.asarray(x, dtype=float)[:, None]  # noqa: E731
     s = model.make_samples(spec, np.broadcast_to(theta, (n, points)).copy(), col(table.speed), col(table.p_a),
@@ -391,8 +392,10 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     warnings = []
     for k in free:
         info = model.parameter_info(k, mechanisms)
-        if info.positive and values[k] <= 1e-9 * abs(info.typical):
+        if info.positive and values[k] < 1e-4 * abs(info.typical):
             warnings.append(f"{k} is at its lower bound 0: the data show no sign of it")
+        elif std[free.index(k)] > abs(values[k]):
+            warnings.append(f"{k}: standard error exceeds the value; the data barely constrain it")
     if not converged:
         warnings.append("the table fit stopped before converging (scipy least_squares, max_nfev)")
     resid = {c: table.measured[c] - pred[c] for c in TABLE_CHANNELS}
@@ -428,7 +431,8 @@ def table_document(tf: TableFit) -> dict:
         "points": len(t),
         "files": sorted(set(map(str, t.file))),
         "channels": t.channels(),
-        "theta_average": f"model.predict averaged over {THETA_POINTS} shaft angles spread over one piston pitch",
+        "theta_average": "model.predict averaged over a revolution: S(θ) at its exact mean n/π, the rest over "
+                         "K ≥ 64 evenly spread shaft angles (exact for trigonometric terms of order < K)",
         "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s"} for c, v in tf.table_noise.items()},
         "weights_from": dict(t.weights_from),
         "variable_displacement": bool(t.variable_displacement),
