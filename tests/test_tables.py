@@ -354,3 +354,25 @@ def test_fit_and_predict_commands(tmp_path, capsys):
     assert len(pred) == len(pts) and pred["torque_Nm"].notna().all()
     resid = _map()["torque_Nm"] - pred["torque_Nm"]
     assert np.sqrt(np.mean(resid**2)) < 2 * NOISE["torque_Nm"]
+
+
+def test_diagnose_on_a_table_names_the_missing_physics(tmp_path):
+    """A map with churning torque (ω²): the forward selection picks it, not a flow law, and a
+    shaft-order ripple (nothing to show in a θ-average) is never a candidate it can fit."""
+    from motorid.discrepancy.catalog import get
+    from motorid.identify.table_pipeline import diagnose_table
+    from motorid.io.tables import read_table
+
+    hydro = get("hydrodynamic_torque")
+    truth = dict(TRUTH, **{"hydrodynamic_torque.C_h": 1e-4})
+    g = map_grid([100, 500, 1000, 2000, 3000], [20, 100, 200, 300], 2)
+    df = simulate_map(SPEC, truth, g, mechanisms=(hydro,), noise=NOISE, rng=np.random.default_rng(4))
+    table = read_table(_write(df, tmp_path / "h.csv"), SPEC)
+    cands = [get("turbulent_leakage"), hydro, get("misalignment_ripple")]
+    dg = diagnose_table(table, SPEC, candidates=cands, max_mechanisms=2)
+    assert [m.id for m in dg["mechanisms"]] == ["hydrodynamic_torque"]
+    ls = dg["fit"].ls
+    k = "hydrodynamic_torque.C_h"
+    assert abs(ls.values[k] - 1e-4) < 3 * ls.std[k]
+    assert dg["comparison"]["models"]["motorid + hydrodynamic_torque"]["kfold"]["torque"]["rms"] < \
+        dg["comparison"]["models"]["Wilson (1950)"]["kfold"]["torque"]["rms"]
