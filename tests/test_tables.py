@@ -297,7 +297,7 @@ def test_kfold_machinery_on_a_known_answer():
 
     class Mean:
         def fit(self, table):
-            self.m = {c: np.nanmean(table.measured[c]) for c in table.measured}
+            self.m = {c: np.nanmean(v) if np.isfinite(v).any() else np.nan for c, v in table.measured.items()}
             return self
 
         def predict(self, table):
@@ -347,6 +347,9 @@ def test_fit_and_predict_commands(tmp_path, capsys):
     assert {"motorid", "Wilson (1950)", "polynomial map"} <= set(models)
     # on data from its own model motorid predicts held-out torque at least as well as Wilson's law
     assert models["motorid"]["kfold"]["torque"]["rms"] <= models["Wilson (1950)"]["kfold"]["torque"]["rms"]
+    assert main(["report", str(tmp_path / "fit")]) == 0  # re-rendered from result.json and the table
+    page = (tmp_path / "fit" / "report.html").read_text()
+    assert 'id="comparison-table"' in page and 'id="efficiency-maps"' in page and "data:image/png" in page
     pts = _map()[["point_id", "speed_rpm", "p_a_bar", "p_b_bar"]]
     pts_path = _write(pts, tmp_path / "pts.csv")
     assert main(["predict", str(tmp_path / "fit"), str(pts_path), "--out", str(tmp_path / "p.csv")]) == 0
@@ -376,3 +379,24 @@ def test_diagnose_on_a_table_names_the_missing_physics(tmp_path):
     assert abs(ls.values[k] - 1e-4) < 3 * ls.std[k]
     assert dg["comparison"]["models"]["motorid + hydrodynamic_torque"]["kfold"]["torque"]["rms"] < \
         dg["comparison"]["models"]["Wilson (1950)"]["kfold"]["torque"]["rms"]
+
+
+def test_temperature_from_the_spec_where_the_table_has_none(tmp_path):
+    from motorid.errors import InputError
+    from motorid.io.tables import read_table
+    from motorid.spec import load_motor_spec
+
+    df = _map().drop(columns=["oil_temp_C"])
+    path = _write(df, tmp_path / "t.csv")
+    motor = tmp_path / "m.toml"
+    motor.write_text(SPEC.to_toml())
+    spec = load_motor_spec(motor)
+    assert spec.oil.temp_C == 50.0
+    t = read_table(path, spec)
+    np.testing.assert_allclose(t.viscosity, float(SPEC.oil.viscosity(50.0)), rtol=1e-12)
+    no_temp = MotorSpec("x", 9, 80e-6, oil=OilSpec())
+    with pytest.raises(InputError, match=r"t\.csv: line 2: no viscosity_mPas nor oil_temp_C.*\[oil\] temp_C"):
+        read_table(path, no_temp)
+    mu = _map().drop(columns=["oil_temp_C"]).assign(viscosity_mPas=30.0)
+    t = read_table(_write(mu, tmp_path / "mu.csv"), no_temp)
+    np.testing.assert_allclose(t.viscosity, 0.030)

@@ -167,3 +167,40 @@ def write_map_report(out_dir, doc: dict, tf, spec=None) -> Path:
     path = Path(out_dir) / "report.html"
     write_bytes_atomic(path, render_map_report(doc, tf).encode("utf-8"))
     return path
+
+
+def is_table_result(out_dir) -> bool:
+    """True when ``out_dir/result.json`` is a fit with operating-point tables."""
+    import json
+
+    f = Path(out_dir) / "result.json"
+    try:
+        return "table" in json.loads(f.read_text())
+    except (OSError, ValueError):
+        return False
+
+
+def rerender_map_report(out_dir, motor=None) -> Path:
+    """report.html of a table fit from its result.json: the tables it names are re-read and
+    the model evaluated at the fitted parameters (nothing refitted)."""
+    from types import SimpleNamespace
+
+    from motorid.errors import InputError
+    from motorid.identify.predict import _parameters, load_result
+    from motorid.identify.tables import point_channels, table_samples
+    from motorid.io.tables import read_tables
+    from motorid.spec import load_motor_spec
+
+    doc, spec, mechanisms = load_result(out_dir, load_motor_spec(motor) if motor else None)
+    paths = doc.get("inputs", {}).get("tables") or []
+    missing = [p for p in paths if not Path(p).exists()]
+    if not paths or missing:
+        raise InputError(f"{Path(out_dir) / 'result.json'}: the table {missing[0] if missing else '(none named)'} "
+                         f"it was fitted on is not found")
+    table = read_tables(paths, spec)
+    params = _parameters(doc, spec, mechanisms)[0]
+    ch = point_channels(params, spec, table_samples(spec, table),
+                        table.displacement if table.variable_displacement else None, mechanisms)
+    tf = SimpleNamespace(table=table, table_prediction=dict(zip(("torque", "q_a", "q_b", "q_case"),
+                                                                (np.asarray(c) for c in ch))))
+    return write_map_report(out_dir, doc, tf, spec)
