@@ -315,6 +315,10 @@ def test_kfold_machinery_on_a_known_answer():
     assert res["kfold"]["q_a"]["rms"] == pytest.approx(2 * rms, rel=1e-12)
     assert res["kfold"]["torque"]["percent_of_span"] == pytest.approx(100 * rms / np.ptp(y))
     assert "q_b" not in res["kfold"]
+    groups = np.arange(len(t)) % 3  # leave one group out: each group predicted by the others' mean
+    res = held_out(Mean(), t, k=5, groups=groups)
+    expect = np.array([y[i] - y[groups != groups[i]].mean() for i in range(len(t))])
+    assert res["leave_one_group_out"]["torque"]["rms"] == pytest.approx(np.sqrt(np.mean(expect**2)), rel=1e-12)
 
 
 @pytest.mark.parametrize("edit,words", [

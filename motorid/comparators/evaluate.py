@@ -67,8 +67,10 @@ def _predict_split(model, table, train, test) -> dict:
     return fitted.predict(table.subset(test))
 
 
-def held_out(model, table, k: int = 5, seed: int = 0) -> dict:
-    """The K-fold and extrapolation errors of ``model`` on ``table`` (see the module's words)."""
+def held_out(model, table, k: int = 5, seed: int = 0, groups=None) -> dict:
+    """The K-fold and extrapolation errors of ``model`` on ``table`` (see the module's words);
+    with ``groups`` (a label per point, e.g. the recording it came from) also the error of
+    predicting each group from a fit on the others ("leave_one_group_out")."""
     n = len(table)
     span = table.measured
     t0 = time.time()
@@ -87,6 +89,17 @@ def held_out(model, table, k: int = 5, seed: int = 0) -> dict:
             continue
         p = _predict_split(model, table, train, test)
         out[name] = rms_errors({c: table.measured[c][test] for c in CHANNELS}, p, span)
+    if groups is not None:
+        groups = np.asarray(groups)
+        labels = np.unique(groups)
+        if labels.size >= 2:
+            pred = {c: np.full(n, np.nan) for c in CHANNELS}
+            for g in labels:
+                test = groups == g
+                p = _predict_split(model, table, ~test, test)
+                for c in CHANNELS:
+                    pred[c][test] = p[c]
+            out["leave_one_group_out"] = rms_errors(table.measured, pred, span)
     out["seconds"] = time.time() - t0
     return out
 
