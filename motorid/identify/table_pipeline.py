@@ -100,9 +100,16 @@ def format_comparison(comparison: dict) -> str:
 
 def _profile_bic(tf) -> float:
     """BIC of a table fit with each channel's noise level profiled out:
-    Σ_c n_c ln(RSS_c / n_c) + k ln n (Gaussian likelihood; the relative weights held)."""
+    Σ_c n_c ln(RSS_c / n_c) + k ln n (Gaussian likelihood; the relative weights held);
+    in a joint fit the logs add their χ² at their own (held) noise levels and their count."""
     t = tf.table
     total, n_all = 0.0, 0
+    if tf.dataset is not None:
+        chi2_table = sum(float(np.nansum((tf.table_residuals[c] / tf.table_sigma[c]) ** 2))
+                         for c in ("torque", "q_a", "q_b", "q_case"))
+        total += tf.ls.chi2 - chi2_table
+        n_all += sum(int(v) for v in tf.ls.used.values()) - sum(
+            int(np.isfinite(t.measured[c]).sum()) for c in ("torque", "q_a", "q_b", "q_case"))
     for c in ("torque", "q_a", "q_b", "q_case"):
         ok = np.isfinite(t.measured[c])
         if not ok.any():
@@ -115,7 +122,7 @@ def _profile_bic(tf) -> float:
 
 
 def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int = 3, candidates=None,
-                   progress=None) -> dict:
+                   progress=None, dataset=None, log_fit=None) -> dict:
     """Forward selection of catalog mechanisms on a table: add the mechanism that lowers the
     profiled BIC most, while it lowers it by at least ``min_evidence``; then the held-out
     comparison of the model with what was found and of the classical models."""
@@ -125,7 +132,8 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
 
     cands = list(candidates if candidates is not None else all_mechanisms())
     current = []
-    fit0 = fit_table(table, spec)
+    joint = dict(dataset=dataset, log_fit=log_fit)
+    fit0 = fit_table(table, spec, **joint)
     bic = _profile_bic(fit0)
     base_fit = best_fit = fit0
     steps = []
@@ -135,7 +143,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             if mech in current:
                 continue
             try:
-                tf = fit_table(table, spec, current + [mech])
+                tf = fit_table(table, spec, current + [mech], **joint)
             except Exception as exc:  # a mechanism whose hooks do not take θ-averaged table samples
                 steps.append({"id": mech.id, "skipped": f"{type(exc).__name__}: {exc}"[:200]})
                 continue
@@ -184,7 +192,7 @@ def diagnosis_table_document(dg: dict, spec) -> dict:
 
 
 def run_table_diagnose(args, logs, tables, spec) -> int:
-    """The `motorid diagnose` command when tables are given (logs, if any, are not searched with them)."""
+    """The `motorid diagnose` command when tables are given (with logs: the joint fit's BIC)."""
     import sys
 
     from motorid.identify.cli import check_output
@@ -193,15 +201,19 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
 
     out = Path(args.out)
     check_output(out, args.force, files=("diagnosis.json",))
-    if logs:
-        raise InputError("diagnose takes either bench logs or operating-point tables, not both at once: "
-                         f"{logs[0]} is a log, {tables[0]} a table")
     table = read_tables(tables, spec)
+    dataset = log_fit = None
+    if logs:
+        from motorid.identify.least_squares import fit_least_squares
+        from motorid.identify.pipeline import load_campaign
+
+        _, dataset = load_campaign(logs, spec)
+        log_fit = fit_least_squares(dataset, spec)
     show = sys.stderr.isatty()
-    dg = diagnose_table(table, spec, min_evidence=args.min_evidence,
+    dg = diagnose_table(table, spec, min_evidence=args.min_evidence, dataset=dataset, log_fit=log_fit,
                         progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
     doc = diagnosis_table_document(dg, spec)
-    doc["inputs"] = {"tables": [str(p) for p in tables], "motor": str(args.motor)}
+    doc["inputs"] = {"logs": [str(p) for p in logs], "tables": [str(p) for p in tables], "motor": str(args.motor)}
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / "diagnosis.json")
     if not doc["mismatch"]:
