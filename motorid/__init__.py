@@ -8,6 +8,7 @@ imports neither JAX nor pandas:
 - :func:`read_logs`       bench logs → one SI ``pandas.DataFrame``
 - :func:`fit`             logs + motor spec → :class:`FitResult` (print, ``.plot()``, ``.to_json()``)
 - :func:`diagnose`        logs + motor spec → :class:`DiagnosisResult` (the missing physics, named)
+- :func:`predict`         a fit + operating points → torque, flows, efficiencies with 95 % bands
 - :func:`load_result`     a saved result.json → :class:`FitResult`
 - :class:`MotorSpec`, :func:`load_motor_spec`   the known motor data
 """
@@ -20,7 +21,7 @@ _os.environ.setdefault("JAX_ENABLE_X64", "1")
 from motorid._version import __version__  # noqa: E402,F401
 
 #: the names of the top-level API, each an attribute of motorid.api
-_API = ("read_logs", "fit", "diagnose", "load_result", "load_motor_spec", "MotorSpec", "OilSpec", "FitResult",
+_API = ("read_logs", "fit", "diagnose", "predict", "load_result", "load_motor_spec", "MotorSpec", "OilSpec", "FitResult",
         "DiagnosisResult")
 __all__ = list(_API)
 

@@ -31,11 +31,26 @@ from motorid.io.spec import load_motor_spec
 from motorid.model import MotorSpec, OilSpec
 from motorid.report.summary import format_diagnosis, format_fit
 
-__all__ = ["read_logs", "fit", "diagnose", "load_result", "load_motor_spec", "MotorSpec", "OilSpec",
+__all__ = ["read_logs", "fit", "diagnose", "predict", "load_result", "load_motor_spec", "MotorSpec", "OilSpec",
            "FitResult", "DiagnosisResult"]
 
-# `predict` (operating-point tables at fitted parameters) is added here by the tables work:
-# def predict(result, operating_points) -> DataFrame, exported in motorid/__init__.py like `fit`.
+
+def predict(result, points, motor=None):
+    """Torque, flows and efficiencies at operating points, with 95 % bands (what ``motorid predict`` writes).
+
+    result : a fit folder or its result.json (written by :func:`fit` + ``save`` or ``motorid fit``)
+    points : operating-point table file(s) (BENCH_LOG_FORMAT.md, outputs absent or ignored)
+    motor : :class:`MotorSpec` or a spec TOML path (default: the spec stored in result.json)
+    Returns a ``pandas.DataFrame``, one row per point, SI-free columns as the CSV
+    (``torque_Nm``, ``q_a_lpm``, …, each with ``_lo95``/``_hi95`` confidence and
+    ``_pi_lo95``/``_pi_hi95`` prediction bands; efficiencies in [-]).
+    """
+    from motorid.identify.predict import load_result as load_fit, predict_points
+    from motorid.io.tables import read_tables
+
+    loaded = load_fit(result, None if motor is None else _spec(motor))
+    paths = [points] if isinstance(points, (str, Path)) else list(points)
+    return predict_points(loaded, read_tables(paths, loaded[1], require_outputs=False))
 
 
 def _spec(motor) -> MotorSpec:
@@ -178,6 +193,7 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
                    mechanisms=_mechanisms(mechanisms))
     inputs = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}
     doc = result_document(res.ls, spec, res.dataset, res.bayes, inputs, res.seconds, res.priors)
+    doc["motor_spec"] = spec.to_toml()  # motorid predict and export need nothing else
     return FitResult(doc, spec, res)
 
 

@@ -42,6 +42,7 @@ class OilSpec:
     nu100_cSt: float = 6.8
     density15_kg_m3: float = 875.0
     expansion_per_K: float = 6.5e-4
+    temp_C: float | None = None  # oil temperature where an operating-point table gives none [°C]
 
     def viscosity(self, temperature_C):
         """Dynamic viscosity μ at ``temperature_C`` [°C] → [Pa·s]."""
@@ -99,6 +100,8 @@ class MotorSpec:
             ]
             if o.expansion_per_K != OilSpec.expansion_per_K:
                 lines.append(f"expansion_per_K = {o.expansion_per_K!r}")
+            if o.temp_C is not None:
+                lines.append(f"temp_C = {o.temp_C!r}")
         return "\n".join(lines) + "\n"
 
     def as_dict(self) -> dict:

@@ -14,7 +14,7 @@ import argparse
 import os
 import sys
 
-from motorid.cli import demo, diagnose, export, fit, fleet, plan, report, ripple_table, simulate
+from motorid.cli import demo, diagnose, export, fit, fleet, plan, predict, report, ripple_table, simulate
 from motorid.errors import InputError
 
 #: the commands, in the order ``motorid --help`` lists them
@@ -22,6 +22,7 @@ COMMANDS = (
     ripple_table,
     simulate,
     fit,
+    predict,
     report,
     diagnose,
     plan,

@@ -29,6 +29,13 @@ def run(args) -> int:
     check_logs_exist(args.logs)
     if not 0 < args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
+    from motorid.io.tables import split_logs_and_tables
+
+    logs, tables = split_logs_and_tables(args.logs)
+    if tables:  # operating-point tables: cli/tables.py
+        from motorid.cli.tables import run_table_diagnose
+
+        return run_table_diagnose(args, logs, tables, spec)
     show = sys.stderr.isatty()
     result = api.diagnose(args.logs, spec, alpha=args.alpha, min_evidence=args.min_evidence, motor_path=args.motor,
                           progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)

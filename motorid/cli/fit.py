@@ -31,6 +31,13 @@ def run(args) -> int:
         raise InputError(f"--harmonics must be between 0 and 10, got {args.harmonics}")
     spec = api.load_motor_spec(args.motor)
     check_logs_exist(args.logs)
+    from motorid.io.tables import split_logs_and_tables
+
+    logs, tables = split_logs_and_tables(args.logs)
+    if tables:  # operating-point tables (no time column): cli/tables.py
+        from motorid.cli.tables import run_table_fit
+
+        return run_table_fit(args, logs, tables, spec)
     result = api.fit(args.logs, spec, bayes=args.bayes, harmonics=args.harmonics, seed=args.seed,
                      motor_path=args.motor)
     result.save(out)

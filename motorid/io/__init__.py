@@ -6,6 +6,7 @@ SI inside motorid; units are converted here, once, and every bad value raises
 - :mod:`logs`     bench logs (BENCH_LOG_FORMAT.md CSV, and the header dialects of other benches)
 - :mod:`spec`     motor spec TOML → :class:`motorid.model.MotorSpec`
 - :mod:`tomlfile` reading TOML files and validating their numbers (specs, protocols, truths)
+- :mod:`tables`   operating-point tables (loss maps, ISO 4409 style) → SI point arrays
 - :mod:`results`  result.json / diagnosis.json: read, and written whole or not at all
 
 Nothing heavy is imported here: ``import motorid.io`` costs nothing; import the module you need.

@@ -45,7 +45,9 @@ def parse_motor_spec(data: dict, source: str = "motor spec") -> MotorSpec:
         beta = toml_number(o, "expansion_per_K", ow, required=False, default=6.5e-4, low=0.0,
                        low_open=False, high=0.01)
         oname = o.get("name", "oil")
-        oil = OilSpec(str(oname), float(nu40), float(nu100), float(rho), float(beta))
+        temp = toml_number(o, "temp_C", ow, required=False, default=None, low=-273.15, high=1000.0)
+        oil = OilSpec(str(oname), float(nu40), float(nu100), float(rho), float(beta),
+                      None if temp is None else float(temp))
     return MotorSpec(
         name=name,
         pistons=int(pistons),

@@ -1,0 +1,99 @@
+"""`motorid fit` and `motorid diagnose` when operating-point tables are given (alone or with logs).
+
+The commands in cli/fit.py and cli/diagnose.py hand over here when any given file is a table (no time column).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from motorid.errors import InputError
+
+from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
+from motorid.identify.table_pipeline import identify_tables, table_result_document
+
+
+def run_table_fit(args, logs, tables, spec) -> int:
+    """The `motorid fit` command when tables are given."""
+    from motorid.comparators.evaluate import compare
+    from motorid.cli._common import check_output
+    from motorid.identify.results import RESULT_FILE, write_json_atomic
+    from motorid.report.summary import format_fit as format_summary
+
+    if getattr(args, "bayes", False):
+        raise InputError("--bayes is not available with operating-point tables (the least-squares covariance is "
+                         "reported)")
+    out = Path(args.out)
+    check_output(out, args.force)
+    tf = identify_tables(logs, tables, spec, harmonics=args.harmonics)
+    comparison = compare(tf.table, spec) if len(tf.table) >= 10 else None
+    inputs = {"logs": [str(p) for p in logs], "tables": [str(p) for p in tables], "motor": str(args.motor)}
+    doc = table_result_document(tf, spec, inputs, comparison)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(doc, out / RESULT_FILE)
+    print(format_summary(doc))
+    if comparison is not None:
+        print(format_comparison(comparison))
+    print(f"wrote {out / RESULT_FILE}")
+    if getattr(args, "report", False):
+        from motorid.report.maps import write_map_report
+
+        path = write_map_report(out, doc, tf, spec)
+        print(f"wrote {path}")
+    return 0
+
+
+def format_comparison(comparison: dict) -> str:
+    """A text table of the held-out errors (% of each channel's span)."""
+    lines = ["held-out RMS error, % of span (K-fold | extrapolation in ΔP | in speed):"]
+    for name, res in comparison["models"].items():
+        cells = []
+        for c in ("torque", "q_a", "q_b", "q_case"):
+            vals = [res.get(k, {}).get(c, {}).get("percent_of_span") for k in
+                    ("kfold", "extrapolate_pressure", "extrapolate_speed")]
+            if any(v is not None for v in vals):
+                cells.append(f"{c} " + "|".join("—" if v is None else f"{v:.2f}" for v in vals))
+        lines.append(f"  {name:<26} " + "  ".join(cells))
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- diagnose
+
+
+def run_table_diagnose(args, logs, tables, spec) -> int:
+    """The `motorid diagnose` command when tables are given (with logs: the joint fit's BIC)."""
+    import sys
+
+    from motorid.cli._common import check_output
+    from motorid.identify.results import write_json_atomic
+    from motorid.io.tables import read_tables
+
+    out = Path(args.out)
+    check_output(out, args.force, files=("diagnosis.json",))
+    table = read_tables(tables, spec)
+    dataset = log_fit = None
+    if logs:
+        from motorid.identify.least_squares import fit_least_squares
+        from motorid.identify.pipeline import load_campaign
+
+        _, dataset = load_campaign(logs, spec)
+        log_fit = fit_least_squares(dataset, spec)
+    show = sys.stderr.isatty()
+    dg = diagnose_table(table, spec, min_evidence=args.min_evidence, dataset=dataset, log_fit=log_fit,
+                        progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
+    doc = diagnosis_table_document(dg, spec)
+    doc["inputs"] = {"logs": [str(p) for p in logs], "tables": [str(p) for p in tables], "motor": str(args.motor)}
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(doc, out / "diagnosis.json")
+    if not doc["mismatch"]:
+        print("no mechanism earns its place on the table (ΔBIC below --min-evidence)")
+    for m in doc["mechanisms"]:
+        print(f"found {m['id']} ({m['name']})")
+    if doc["comparison"]:
+        print(format_comparison(doc["comparison"]))
+    print(f"wrote {out / 'diagnosis.json'}")
+    return 0

@@ -1,0 +1,48 @@
+"""Operating-point tables through the fit: tables alone or with logs (motorid/identify/tables.py does one fit)."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from motorid.errors import InputError
+
+
+def identify_tables(log_paths, table_paths, spec, mechanisms=(), harmonics=None):
+    """Read the tables (and logs), fit them jointly; returns a :class:`~motorid.identify.tables.TableFit`."""
+    from motorid.identify.tables import fit_table
+    from motorid.io.tables import read_tables
+
+    t0 = time.time()
+    table = read_tables(table_paths, spec)
+    dataset = log_fit = None
+    if log_paths:
+        from motorid.identify.least_squares import FitOptions, fit_least_squares
+        from motorid.identify.pipeline import load_campaign
+
+        _, dataset = load_campaign(log_paths, spec)
+        log_fit = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=FitOptions(harmonics=harmonics))
+    tf = fit_table(table, spec, mechanisms, dataset=dataset, log_fit=log_fit, harmonics=harmonics)
+    tf.seconds = time.time() - t0
+    return tf
+
+
+def table_result_document(tf, spec, inputs: dict, comparison: dict | None = None) -> dict:
+    """result.json of a fit with tables: the document of a log fit, plus ``table``, ``comparison``
+    and ``motor_spec`` (the spec's TOML, so that ``motorid predict`` needs nothing else)."""
+    from motorid.identify.results import json_safe as _clean, result_document
+    from motorid.identify.tables import table_document
+
+    doc = result_document(tf.ls, spec, tf.dataset, None, inputs, tf.seconds)
+    doc["fit"]["method"] = ("scipy.optimize.least_squares (trust region, bounds), JAX Jacobian; table points: the "
+                            "model averaged over shaft angle, each output channel weighted by a noise level "
+                            "estimated from its residuals" + ("; jointly with the logs, weighted by the logs' own "
+                                                             "noise levels" if tf.dataset is not None else ""))
+    doc["table"] = _clean(table_document(tf))
+    if comparison is not None:
+        doc["comparison"] = _clean(comparison)
+    doc["motor_spec"] = spec.to_toml()
+    return doc
