@@ -13,6 +13,7 @@ def register(sub):
     p = sub.add_parser("diagnose", help="locate model-data mismatch, name the missing physics, refit")
     p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files")
     p.add_argument("--motor", required=True, help="motor spec TOML")
+    p.add_argument("--channels", default=None, help="channel map TOML for DAQ files (docs/formats.md)")
     p.add_argument("--out", required=True, help="output folder for diagnosis.json")
     p.add_argument("--force", action="store_true", help="overwrite an existing diagnosis")
     p.add_argument("--alpha", type=float, default=1e-3, help="family-wise false-alarm rate of the structure tests")
@@ -39,7 +40,7 @@ def run_diagnose(args) -> int:
     check_logs_exist(args.logs)
     if not 0 < args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
-    _, dataset = load_campaign(args.logs, spec)
+    _, dataset = load_campaign(args.logs, spec, args.channels)
     show = sys.stderr.isatty()
     dg = diagnose(dataset, spec, alpha=args.alpha, min_evidence=args.min_evidence,
                   progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)

@@ -14,6 +14,7 @@ def register(sub):
     p = sub.add_parser("fit", help="identify the motor parameters from bench logs")
     p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files (BENCH_LOG_FORMAT.md)")
     p.add_argument("--motor", required=True, help="motor spec TOML")
+    p.add_argument("--channels", default=None, help="channel map TOML for DAQ files (docs/formats.md)")
     p.add_argument("--out", required=True, help="output folder for result.json")
     p.add_argument("--bayes", action="store_true", help="also sample the posterior with emcee")
     p.add_argument("--force", action="store_true", help="overwrite an existing result")
@@ -50,7 +51,7 @@ def run_fit(args) -> int:
     spec = load_motor_spec(args.motor)
     check_logs_exist(args.logs)
     res = identify(args.logs, spec, bayes=args.bayes, options=FitOptions(harmonics=args.harmonics),
-                   seed=args.seed)
+                   seed=args.seed, channels=args.channels)
     inputs = {"logs": [str(p) for p in args.logs], "motor": str(args.motor)}
     doc = result_document(res.ls, spec, res.dataset, res.bayes, inputs, res.seconds, res.priors)
     out.mkdir(parents=True, exist_ok=True)

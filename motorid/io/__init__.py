@@ -1,0 +1,1 @@
+"""Reading and writing files at motorid's edge (DAQ formats, channel maps)."""
