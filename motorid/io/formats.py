@@ -414,7 +414,10 @@ def needs_foreign_reader(path) -> bool:
         fields, delim, decimal, _ = sniff_text(text)
     except InputError:
         return False
-    return decimal == "," or delim not in (",", ";", "\t") or text.lstrip().startswith("#")
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    first = next((ln for ln in lines if not ln.lstrip().startswith("#")), "")
+    header_in_comment = bool(re.match(r"\s*[-+.\d]", first))  # '#time,…' right above the data
+    return decimal == "," or delim not in (",", ";", "\t") or header_in_comment
 
 
 def standard_table(path, cmap=None) -> pd.DataFrame:
