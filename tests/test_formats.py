@@ -357,6 +357,18 @@ def test_mbari_recording_reads_through_its_map_with_physical_signs():
     ratio = np.median(f["q_a_m3_s"].to_numpy()[run] / ideal_flow[run])
     assert 0.95 < ratio < 1.05
     np.testing.assert_allclose(f["q_b_m3_s"], -f["q_a_m3_s"])
+    # points.csv (make_points.py) holds this recording's quasi-steady points, as made from it
+    import importlib.util
+
+    spec_mod = importlib.util.spec_from_file_location("make_points", MBARI / "make_points.py")
+    make_points = importlib.util.module_from_spec(spec_mod)
+    spec_mod.loader.exec_module(make_points)
+    mine = make_points.quasi_steady_points(f)
+    shipped = pd.read_csv(MBARI / "points.csv")
+    shipped = shipped[shipped["recording"] == "FrictionIDMovesWithBiasCurr"].reset_index(drop=True)
+    assert len(mine) == len(shipped) >= 10
+    for col in ("speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm", "q_a_lpm"):
+        np.testing.assert_allclose(shipped[col], mine[col], rtol=1e-5, atol=1e-5, err_msg=col)
     # the first release of the 2022-01-28 test logged the lower pressure negated; its own map flips it
     g = read_logs(MBARI / "original_sign" / "2022.01.28T16.46.31.exp.gz", spec)
     h = read_logs(MBARI / "2022.01.28T16.46.31_new.exp.gz", spec)
