@@ -335,6 +335,7 @@ def test_bad_channel_map_is_one_line_naming_file_and_key(edit, words, campaign, 
 # --------------------------------------------------------------------------- real recordings
 
 MBARI = REPO / "real_data" / "mbari_f11"
+MBARI_POINTS = REPO / "real_data" / "mbari_f11_points"
 
 
 def test_mbari_recording_reads_through_its_map_with_physical_signs():
@@ -360,11 +361,11 @@ def test_mbari_recording_reads_through_its_map_with_physical_signs():
     # points.csv (make_points.py) holds this recording's quasi-steady points, as made from it
     import importlib.util
 
-    spec_mod = importlib.util.spec_from_file_location("make_points", MBARI / "make_points.py")
+    spec_mod = importlib.util.spec_from_file_location("make_points", MBARI_POINTS / "make_points.py")
     make_points = importlib.util.module_from_spec(spec_mod)
     spec_mod.loader.exec_module(make_points)
     mine = make_points.quasi_steady_points(f)
-    shipped = pd.read_csv(MBARI / "points.csv")
+    shipped = pd.read_csv(MBARI_POINTS / "points.csv")
     shipped = shipped[shipped["recording"] == "FrictionIDMovesWithBiasCurr"].reset_index(drop=True)
     assert len(mine) == len(shipped) >= 10
     for col in ("speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm", "q_a_lpm"):

@@ -458,6 +458,19 @@ def find_channel_map(path):
     return None
 
 
+def _write_exact_csv(table: pd.DataFrame, path: Path) -> None:
+    """Table → CSV whose floats read back bit for bit (shortest round-trip text; NaN → empty).
+    Arrow's C++ writer is about ten times faster than pandas'; pandas where Arrow cannot
+    type a column (mixed text and numbers in an extra column)."""
+    import pyarrow as pa
+    import pyarrow.csv as pa_csv
+
+    try:
+        pa_csv.write_csv(pa.Table.from_pandas(table, preserve_index=False), str(path))
+    except (pa.ArrowException, TypeError, ValueError):
+        table.to_csv(path, index=False, lineterminator="\n")  # repr: shortest round-trip text
+
+
 def read_foreign(path, spec=None, channels=None) -> pd.DataFrame:
     """Read a foreign file into the canonical SI frame of :func:`motorid.logs.read_log`.
 
@@ -473,11 +486,9 @@ def read_foreign(path, spec=None, channels=None) -> pd.DataFrame:
         channels = find_channel_map(path)
     cmap = channels if isinstance(channels, ChannelMap) or channels is None else load_channel_map(channels)
     table = standard_table(path, cmap)
-    buf = io.StringIO()
-    table.to_csv(buf, index=False, lineterminator="\n")  # repr: the shortest text that reads back the same float
     with tempfile.TemporaryDirectory(prefix="motorid-") as tmp:
         twin = Path(tmp) / (path.name + ".csv")
-        twin.write_text(buf.getvalue(), encoding="utf-8")
+        _write_exact_csv(table, twin)
         try:
             frame = read_log(twin, spec)
         except InputError as exc:

@@ -1,12 +1,12 @@
 """Quasi-steady operating points from the MBARI recordings → points.csv (an operating-point table).
 
-    python real_data/mbari_f11/make_points.py          # rewrites real_data/mbari_f11/points.csv
+    python real_data/mbari_f11_points/make_points.py   # rewrites real_data/mbari_f11_points/points.csv
 
 The recordings are continuous wave-like motions, not steady runs. A point here is the mean
 of the samples of one recording that fall in one cell of a (speed, ΔP) grid — 250 rpm by
 10 bar — while the shaft turns (|n| ≥ 200 rpm) and barely accelerates (|dn/dt| < 300 rpm/s,
 so that an inertia of even 1e-3 kg·m² adds under 0.03 N·m), with at least 25 samples
-(0.5 s) in the cell. Torque and flows are those of channels.toml (torque from generator
+(0.5 s) in the cell. Torque and flows are those of ../mbari_f11/channels.toml (torque from generator
 current, flow from ram speed: PROVENANCE.md). Columns as BENCH_LOG_FORMAT.md "Operating-point
 tables", plus ``recording`` (the source file, for leave-one-recording-out tests) and
 ``accel_rpm_s`` (the cell's mean dn/dt, what inertia could add to its torque).
@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 HERE = Path(__file__).resolve().parent
+RECORDINGS = HERE.parent / "mbari_f11"  # the recordings and their channels.toml
 SPEED_BIN_RPM = 250.0
 DP_BIN_BAR = 10.0
 MIN_SPEED_RPM = 200.0
@@ -58,8 +59,8 @@ def main() -> Path:
     from motorid.logs import read_logs
     from motorid.spec import load_motor_spec
 
-    spec = load_motor_spec(HERE / "motor.toml")
-    points = quasi_steady_points(read_logs(HERE, spec))
+    spec = load_motor_spec(RECORDINGS / "motor.toml")
+    points = quasi_steady_points(read_logs(RECORDINGS, spec))
     out = HERE / "points.csv"
     points.to_csv(out, index=False, float_format="%.6g", lineterminator="\n")
     print(f"wrote {out}: {len(points)} points from {points['recording'].nunique()} recordings")
