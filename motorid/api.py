@@ -64,7 +64,7 @@ def _motor_input(motor, motor_path) -> str | None:
     return None if isinstance(motor, MotorSpec) else str(motor)
 
 
-def read_logs(paths, motor=None):
+def read_logs(paths, motor=None, channels=None):
     """Bench logs (BENCH_LOG_FORMAT.md CSV, or another bench's header dialect) as one SI frame.
 
     paths : a file or a list of files (``.csv``, ``.csv.gz``)
@@ -73,9 +73,11 @@ def read_logs(paths, motor=None):
     Returns a ``pandas.DataFrame``: run_id, protocol, time_s [s], theta_rad [rad], speed_rad_s [rad/s],
     torque_Nm [N·m], p_a_Pa, p_b_Pa, p_case_Pa [Pa gauge], q_a_m3_s, q_b_m3_s, q_case_m3_s [m³/s],
     oil_temp_C [°C], viscosity_Pa_s [Pa·s].
+    channels : a channel-map TOML for DAQ files (.mat, HDF5, TDMS, MDF4, Parquet, xlsx, other CSV;
+        docs/formats.md)
     """
     paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
-    return _read_logs(paths, None if motor is None else _spec(motor))
+    return _read_logs(paths, None if motor is None else _spec(motor), channels)
 
 
 def _mechanisms(mechanisms) -> tuple:
@@ -140,7 +142,7 @@ class FitResult:
         if not inputs.get("logs") or (self.spec is None and not inputs.get("motor")):
             raise InputError("this result names no logs or motor spec (inputs) to draw the data from")
         spec = self.spec or load_motor_spec(inputs["motor"])
-        _, dataset = load_campaign(inputs["logs"], spec)
+        _, dataset = load_campaign(inputs["logs"], spec, inputs.get("channels"))
         params = {k: e["value"] for k, e in self.document["parameters"].items() if e.get("value") is not None}
         return dataset, spec, params, _mechanisms(self.document["fit"].get("mechanisms", []))
 
@@ -174,7 +176,7 @@ class FitResult:
 
 
 def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = None, seed: int = 0,
-        mechanisms: Sequence = (), motor_path=None) -> FitResult:
+        mechanisms: Sequence = (), motor_path=None, channels=None) -> FitResult:
     """Identify the motor's parameters from bench logs (what ``motorid fit`` does).
 
     logs : bench log paths; motor : :class:`MotorSpec` or a spec TOML path
@@ -182,6 +184,7 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
     harmonics : order M of the K_L(θ) Fourier series [-] (default: the spec's)
     mechanisms : extra physics fitted too (ids of :mod:`motorid.physics.registry` or mechanisms)
     motor_path : the spec's file, recorded in result.json's inputs when ``motor`` is a MotorSpec
+    channels : a channel-map TOML for DAQ files (docs/formats.md)
     """
     from motorid.identify.least_squares import FitOptions
     from motorid.identify.pipeline import identify
@@ -190,8 +193,10 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
     spec = _spec(motor)
     logs = [logs] if isinstance(logs, (str, Path)) else list(logs)
     res = identify(logs, spec, bayes=bayes, options=FitOptions(harmonics=harmonics), seed=seed,
-                   mechanisms=_mechanisms(mechanisms))
+                   mechanisms=_mechanisms(mechanisms), channels=channels)
     inputs = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}
+    if channels is not None:
+        inputs["channels"] = str(channels)
     doc = result_document(res.ls, spec, res.dataset, res.bayes, inputs, res.seconds, res.priors)
     doc["motor_spec"] = spec.to_toml()  # motorid predict and export need nothing else
     return FitResult(doc, spec, res)
@@ -250,7 +255,7 @@ class DiagnosisResult:
 
 
 def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float = 10.0, progress=None,
-             motor_path=None) -> DiagnosisResult:
+             motor_path=None, channels=None) -> DiagnosisResult:
     """Locate where the base model misses the data, name the missing physics, refit (``motorid diagnose``).
 
     alpha : family-wise false-alarm rate of the structure tests [-]
@@ -261,7 +266,7 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
 
     spec = _spec(motor)
     logs = [logs] if isinstance(logs, (str, Path)) else list(logs)
-    _, dataset = load_campaign(logs, spec)
+    _, dataset = load_campaign(logs, spec, channels)
     dg = _diagnose(dataset, spec, alpha=alpha, min_evidence=min_evidence, progress=progress)
     doc = diagnosis_document(dg, spec)
     doc["inputs"] = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}

@@ -11,6 +11,7 @@ def add_campaign_arguments(p, logs_help: str = "bench log CSV or CSV.gz files") 
     """The arguments of a command that reads a campaign: the logs and ``--motor``."""
     p.add_argument("logs", nargs="+", help=logs_help)
     p.add_argument("--motor", required=True, help="motor spec TOML")
+    p.add_argument("--channels", default=None, help="channel map TOML for DAQ files (docs/formats.md)")
 
 
 def check_output(out: Path, force: bool, files=("result.json",)):

@@ -38,6 +38,7 @@ def run(args) -> int:
         return run_table_diagnose(args, logs, tables, spec)
     show = sys.stderr.isatty()
     result = api.diagnose(args.logs, spec, alpha=args.alpha, min_evidence=args.min_evidence, motor_path=args.motor,
+                          channels=args.channels,
                           progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
     result.save(out)
     print(result)

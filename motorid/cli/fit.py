@@ -39,7 +39,7 @@ def run(args) -> int:
 
         return run_table_fit(args, logs, tables, spec)
     result = api.fit(args.logs, spec, bayes=args.bayes, harmonics=args.harmonics, seed=args.seed,
-                     motor_path=args.motor)
+                     motor_path=args.motor, channels=args.channels)
     result.save(out)
     print(result)
     print(f"wrote {out / RESULT_FILE}")

@@ -28,7 +28,7 @@ def run(args) -> int:
         raise InputError(f"--top must be at least 1, got {args.top}")
     spec = load_motor_spec(args.motor)
     check_logs_exist(args.logs)
-    _, dataset = load_campaign(args.logs, spec)
+    _, dataset = load_campaign(args.logs, spec, args.channels)
     ls = fit_least_squares(dataset, spec)
     plan = suggest_runs(ls, dataset, spec, top=args.top, parameter=args.parameter)
     if args.json:

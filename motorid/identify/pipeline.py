@@ -20,12 +20,12 @@ class Identification:
     priors: dict
 
 
-def load_campaign(paths: Sequence, spec):
+def load_campaign(paths: Sequence, spec, channels=None):
     """Read and validate the logs, then extract steady samples and breakaway events."""
     from motorid.identify.extract import extract
     from motorid.io.logs import read_logs
 
-    frame = read_logs([str(p) for p in paths], spec)
+    frame = read_logs([str(p) for p in paths], spec, channels)
     return frame, extract(frame, spec)
 
 
@@ -49,12 +49,12 @@ def viscosity_model_warning(frame, dataset, ls) -> str:
 
 def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | None = None,
              mechanisms: Sequence = (), seed: int = 0, progress: bool | None = None,
-             dataset=None, frame=None) -> Identification:
+             dataset=None, frame=None, channels=None) -> Identification:
     """The main job: a least-squares fit of every parameter the logs identify, and
     with ``bayes`` an emcee posterior started from it."""
     t0 = time.time()
     if dataset is None:
-        frame, dataset = load_campaign(paths, spec)
+        frame, dataset = load_campaign(paths, spec, channels)
     ls = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=options)
     note = viscosity_model_warning(frame, dataset, ls)
     if note:

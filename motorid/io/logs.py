@@ -315,7 +315,7 @@ def _oil_viscosity(spec, temperature_C: np.ndarray) -> np.ndarray:
     return np.asarray(spec.oil.viscosity(temperature_C), dtype=float)
 
 
-def read_log(path, spec=None) -> pd.DataFrame:
+def read_log(path, spec=None, channels=None) -> pd.DataFrame:
     """Read and validate one bench log (``.csv`` or ``.csv.gz``) into the canonical SI frame.
 
     path : the log file (gzip is recognised by its magic bytes too);
@@ -334,6 +334,10 @@ def read_log(path, spec=None) -> pd.DataFrame:
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{path}: is a directory, not a log file")
+    from motorid.io import formats  # DAQ formats and channel maps (docs/formats.md)
+
+    if channels is not None or formats.needs_foreign_reader(path) or formats.find_channel_map(path):
+        return formats.read_foreign(path, spec, channels)
     fields, delim, body, header_line = _split_header(path, _read_text(path))
     found, extras = _map_columns(path, fields)
     table = _parse_body(path, body, delim, fields, found, header_line)
@@ -449,8 +453,9 @@ def _log_paths(paths) -> list:
     for p in paths:
         p = Path(p)
         if p.is_dir():
-            found = sorted(q for q in p.iterdir() if q.is_file() and
-                           (q.name.endswith(".csv") or q.name.endswith(".csv.gz")))
+            from motorid.io.formats import data_files_in
+
+            found = data_files_in(p)
             if not found:
                 raise InputError(f"{p}: directory holds no .csv or .csv.gz log")
             result += found
@@ -461,7 +466,7 @@ def _log_paths(paths) -> list:
     return result
 
 
-def read_logs(paths, spec=None) -> pd.DataFrame:
+def read_logs(paths, spec=None, channels=None) -> pd.DataFrame:
     """Read a campaign: one or many logs (files, or directories of ``*.csv``/``*.csv.gz``).
 
     Returns the frames of :func:`read_log` stacked; ``run`` is the run_id, or
@@ -475,7 +480,7 @@ def read_logs(paths, spec=None) -> pd.DataFrame:
         if key in resolved:
             raise InputError(f"{p}: log given twice (also as {resolved[key]})")
         resolved[key] = p
-    frames = [read_log(p, spec) for p in files]
+    frames = [read_log(p, spec, channels) for p in files]
     names = [p.name for p in files]
     labels = names if len(set(names)) == len(names) else [str(p) for p in files]
     owners: dict = {}

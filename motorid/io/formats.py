@@ -1,0 +1,502 @@
+"""The files benches write: one reader per DAQ format, each giving named channels.
+
+Formats (docs/formats.md): MATLAB .mat v5 (scipy.io.loadmat) and v7.3 (h5py),
+HDF5 (h5py), Parquet (pyarrow), Excel .xlsx (openpyxl through pandas), NI TDMS
+(npTDMS), ASAM MDF4 (asammdf), and delimited text with any delimiter and a
+decimal point or comma (sniffed).  A reader is a *source*: ``get(name)`` gives
+one channel as an array, ``names()`` what the file holds (for error messages),
+and ``table()`` the whole file as columns where the format is tabular.
+
+:func:`read_foreign` turns a file (with a channel map, or tabular with the
+format's own column names) into a table in the format's units, writes it as a
+full-precision CSV and reads that with :func:`motorid.io.logs.read_log`, so that a
+foreign file gives exactly the frame its CSV twin gives, with the same checks.
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import re
+import tempfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from motorid.errors import InputError
+
+SUFFIXES = {
+    ".mat": "mat", ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5", ".parquet": "parquet", ".pq": "parquet",
+    ".xlsx": "xlsx", ".xlsm": "xlsx", ".tdms": "tdms", ".mf4": "mdf", ".mdf": "mdf",
+    ".txt": "text", ".dat": "text", ".exp": "text", ".tsv": "text", ".csv": "csv",
+}
+_LIBRARY = {"mat": "scipy.io / h5py", "hdf5": "h5py", "parquet": "pyarrow", "xlsx": "openpyxl",
+            "tdms": "npTDMS", "mdf": "asammdf", "text": "pandas", "csv": "pandas"}
+
+
+def _suffix(path: Path) -> str:
+    name = path.name.lower()
+    if name.endswith(".gz"):
+        name = name[:-3]
+    return "." + name.rsplit(".", 1)[-1] if "." in name else ""
+
+
+def format_of(path, cmap=None) -> str | None:
+    """The format of ``path``: the map's [file] format, else by suffix; None if unknown."""
+    if cmap is not None and cmap.file.get("format"):
+        return cmap.file["format"]
+    return SUFFIXES.get(_suffix(Path(path)))
+
+
+def _not_found(path, name: str, names) -> InputError:
+    names = list(names)
+    listing = ", ".join(f"'{n}'" for n in names[:12]) + (f", … ({len(names)} in all)" if len(names) > 12 else "")
+    return InputError(f"{path}: no channel '{name}' (the file has: {listing or 'none'})")
+
+
+class _Columns:
+    """A tabular source: a DataFrame whose columns are the channels."""
+
+    def __init__(self, path, frame: pd.DataFrame):
+        self.path, self.frame = path, frame
+
+    def names(self):
+        return [str(c) for c in self.frame.columns]
+
+    def get(self, name: str):
+        if name not in self.frame.columns:
+            matches = [c for c in self.frame.columns if str(c).strip() == name.strip()]
+            if len(matches) != 1:
+                raise _not_found(self.path, name, self.names())
+            name = matches[0]
+        col = self.frame[name]
+        if isinstance(col, pd.DataFrame):
+            raise InputError(f"{self.path}: column '{name}' appears twice")
+        return col.to_numpy()
+
+    def table(self) -> pd.DataFrame:
+        return self.frame
+
+
+# --------------------------------------------------------------------------- text
+
+_DECIMAL_COMMA = re.compile(r"(?:^|[\s;|\t])[-+]?\d+,\d+(?:[eE][-+]?\d+)?(?=$|[\s;|\t])")
+
+
+def _read_text(path: Path) -> str:
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except Exception as exc:  # noqa: BLE001 — any corruption is one line
+            raise InputError(f"{path}: corrupt gzip data ({exc})") from None
+    if b"\x00" in raw[:65536]:
+        raise InputError(f"{path}: not a text file (binary content)")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _fields(line: str, delim: str | None) -> list:
+    if delim is None:
+        return line.split()
+    return [f.strip() for f in next(csv.reader([line], delimiter=delim))]
+
+
+def sniff_text(text: str, delimiter=None, decimal=None, header_row=None):
+    """(header fields, data delimiter or None for whitespace, decimal mark, index of the first data line).
+
+    The header is the first line that is not blank and not a '#' comment; a
+    '#' line right before the first data line is the header where no other is
+    (as in ``#time(s),Pos(in),…`` files).  The header and the data may use
+    different delimiters.  A decimal comma is assumed where the data delimiter
+    is not a comma and a cell reads like ``1,5``.
+    """
+    lines = text.splitlines()
+    if header_row is not None:
+        h = header_row - 1
+        if h >= len(lines):
+            raise InputError(f"header_row {header_row} is past the end of the file ({len(lines)} lines)")
+    else:
+        h = None
+        for i, line in enumerate(lines):
+            s = line.strip()
+            if not s:
+                continue
+            if s.startswith("#"):
+                nxt = next((lines[k] for k in range(i + 1, len(lines)) if lines[k].strip()), "")
+                if nxt and not nxt.lstrip().startswith("#") and re.match(r"\s*[-+.\d]", nxt):
+                    h = i
+                    break
+                continue
+            h = i
+            break
+        if h is None:
+            raise InputError("no header line")
+    header = lines[h].strip().lstrip("#").strip()
+    first = next((k for k in range(h + 1, len(lines)) if lines[k].strip()), None)
+    data = lines[first] if first is not None else ""
+
+    def pick(line: str):
+        counts = {d: line.count(d) for d in (";", "\t", "|", ",")}
+        best = max(counts, key=counts.get)
+        return best if counts[best] > 0 else None
+
+    hdelim = pick(header)
+    ddelim = delimiter if delimiter is not None else pick(data) if data else hdelim
+    if ddelim == " ":
+        ddelim = None
+    if ddelim == "," and hdelim == "," and data and data.count(",") > header.count(","):
+        ddelim = "," if data.count(";") == 0 else ";"  # "1,5,2,0" under a 2-field header: not sniffable
+    header_fields = _fields(header, hdelim)
+    if decimal is None:
+        decimal = "," if ddelim != "," and _DECIMAL_COMMA.search(data) else "."
+    return header_fields, ddelim, decimal, (first if first is not None else len(lines))
+
+
+def read_text_table(path, options: dict | None = None) -> pd.DataFrame:
+    """A delimited text file (any delimiter, decimal point or comma) → DataFrame of its columns."""
+    options = options or {}
+    path = Path(path)
+    text = _read_text(path)
+    try:
+        fields, delim, decimal, start = sniff_text(text, options.get("delimiter"), options.get("decimal"),
+                                                   options.get("header_row"))
+    except InputError as exc:
+        raise InputError(f"{path}: {exc}") from None
+    body = "\n".join(text.splitlines()[start:])
+    names = [f if f else f"column {j + 1}" for j, f in enumerate(fields)]
+    try:
+        frame = pd.read_csv(io.StringIO(body), sep=delim if delim is not None else r"\s+", header=None,
+                            names=names, decimal=decimal, engine="c",
+                            skipinitialspace=True, comment=None, skip_blank_lines=True, index_col=False)
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise InputError(f"{path}: cannot parse as delimited text ({str(exc).splitlines()[0]})") from None
+    return frame
+
+
+# --------------------------------------------------------------------------- binary formats
+
+def _mat_v5(path: Path):
+    from scipy.io import loadmat
+
+    data = loadmat(str(path), squeeze_me=True, struct_as_record=False, chars_as_strings=True)
+    top = {k: v for k, v in data.items() if not k.startswith("__")}
+
+    class _Mat:
+        def names(self):
+            out = []
+            for k, v in top.items():
+                fields = getattr(v, "_fieldnames", None)
+                out += [f"{k}.{f}" for f in fields] if fields else [k]
+            return out
+
+        def get(self, name: str):
+            parts = re.split(r"[./]", name.strip("/"))
+            value = top.get(parts[0])
+            for p in parts[1:]:
+                value = getattr(value, p, None) if value is not None else None
+            if value is None or parts[0] not in top:
+                raise _not_found(path, name, self.names())
+            return np.asarray(value)
+
+        def table(self):
+            return _columns_of(path, {n: self.get(n) for n in self.names()})
+
+    return _Mat()
+
+
+class _H5:
+    """HDF5 datasets by path; ``matlab``: a MATLAB v7.3 file (column-major: axes reversed)."""
+
+    def __init__(self, path: Path, group: str | None, matlab: bool):
+        import h5py
+
+        self.path, self.matlab, self.group = path, matlab, (group or "").strip("/")
+        self.file = h5py.File(path, "r")
+        self._h5py = h5py
+
+    def names(self):
+        out = []
+
+        def visit(name, obj):
+            if isinstance(obj, self._h5py.Dataset) and not name.startswith("#"):
+                if obj.dtype.names:
+                    out.extend(f"{name}/{f}" for f in obj.dtype.names)
+                else:
+                    out.append(name)
+
+        self.file.visititems(visit)
+        return out
+
+    def _full(self, name: str) -> str:
+        name = name.strip().replace(".", "/") if self.matlab else name.strip()
+        return f"{self.group}/{name.lstrip('/')}" if self.group and not name.startswith("/") else name.lstrip("/")
+
+    def get(self, name: str):
+        full = self._full(name)
+        obj = self.file.get(full)
+        if obj is None and "/" in full:  # a field of a compound (table) dataset
+            parent, fld = full.rsplit("/", 1)
+            ds = self.file.get(parent)
+            if isinstance(ds, self._h5py.Dataset) and ds.dtype.names and fld in ds.dtype.names:
+                return np.asarray(ds[fld])
+        if not isinstance(obj, self._h5py.Dataset):
+            raise _not_found(self.path, name, self.names())
+        value = obj[()]
+        if self.matlab:
+            value = np.asarray(value).T
+            if obj.attrs.get("MATLAB_class", b"") in (b"char", "char"):
+                return np.array("".join(map(chr, np.ravel(value))))
+        value = np.asarray(value)
+        if value.dtype.kind == "S":
+            value = value.astype(str)
+        return value
+
+    def table(self):
+        return _columns_of(self.path, {n: self.get(n) for n in self.names()})
+
+
+def _columns_of(path, arrays: dict) -> pd.DataFrame:
+    """Same-length 1-D arrays → DataFrame (a file read without a channel map)."""
+    cols = {k: np.ravel(v) for k, v in arrays.items() if np.ndim(np.squeeze(v)) == 1}
+    sizes = {v.size for v in cols.values()}
+    if len(sizes) != 1:
+        raise InputError(f"{path}: its channels are not one table of equal-length columns; "
+                         f"read it with a channel map (--channels, docs/formats.md)")
+    return pd.DataFrame(cols)
+
+
+def _tdms(path: Path, group: str | None):
+    from nptdms import TdmsFile
+
+    tdms = TdmsFile.read(str(path))
+
+    class _Tdms:
+        def names(self):
+            return [f"{g.name}/{c.name}" for g in tdms.groups() for c in g.channels()]
+
+        def _channel(self, name: str):
+            base = name
+            if "/" in base:
+                g, c = base.split("/", 1)
+                try:
+                    return tdms[g][c]
+                except KeyError:
+                    pass
+            groups = [tdms[group]] if group and group in [g.name for g in tdms.groups()] else tdms.groups()
+            found = [g[base] for g in groups if base in [c.name for c in g.channels()]]
+            if len(found) == 1:
+                return found[0]
+            if len(found) > 1:
+                raise InputError(f"{path}: channel '{name}' is in several groups; write it as 'group/{name}'")
+            raise _not_found(path, name, self.names())
+
+        def get(self, name: str):
+            if name.endswith("@time"):
+                ch = self._channel(name[:-5])
+                try:
+                    return ch.time_track()
+                except (KeyError, ValueError) as exc:
+                    raise InputError(f"{path}: channel '{name[:-5]}' has no waveform timing ({exc})") from None
+            return np.asarray(self._channel(name)[:])
+
+        def table(self):
+            groups = [tdms[group]] if group else tdms.groups()
+            if len(groups) != 1:
+                raise InputError(f"{path}: {len(groups)} groups; name one ([file] group) or use a channel map")
+            return _columns_of(path, {c.name: c[:] for c in groups[0].channels()})
+
+    return _Tdms()
+
+
+def _mdf(path: Path):
+    from asammdf import MDF
+
+    mdf = MDF(str(path))
+
+    class _Mdf:
+        def names(self):
+            return sorted(n for n in mdf.channels_db if not n.startswith("$"))
+
+        def _signal(self, name: str):
+            if name not in mdf.channels_db:
+                raise _not_found(path, name, self.names())
+            if len(mdf.channels_db[name]) > 1:
+                raise InputError(f"{path}: channel '{name}' is in several groups; rename it in the "
+                                 f"recorder or export one group")
+            return mdf.get(name)
+
+        def get(self, name: str):
+            if name.endswith("@time"):
+                return np.asarray(self._signal(name[:-5]).timestamps, dtype=float)
+            return np.asarray(self._signal(name).samples)
+
+        def table(self):
+            frame = mdf.to_dataframe(time_from_zero=False)
+            frame.insert(0, "time_s", frame.index.to_numpy(dtype=float))
+            return frame.reset_index(drop=True)
+
+    return _Mdf()
+
+
+def open_source(path, cmap=None):
+    """Open ``path`` as a source of named channels (see the module doc)."""
+    path = Path(path)
+    fmt = format_of(path, cmap)
+    if fmt is None:
+        raise InputError(f"{path}: unknown file type '{_suffix(path) or path.name}' (motorid reads "
+                         f"{', '.join(sorted(set(SUFFIXES)))}; name the format in a channel map's [file] format)")
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, not a data file")
+    options = dict(cmap.file) if cmap is not None else {}
+    try:
+        if fmt in ("text", "csv"):
+            return _Columns(path, read_text_table(path, options))
+        if fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            return _Columns(path, pq.read_table(str(path)).to_pandas())
+        if fmt == "xlsx":
+            header = options.get("header_row", 1) - 1
+            frame = pd.read_excel(path, sheet_name=options.get("sheet", 0), header=header, engine="openpyxl")
+            return _Columns(path, frame)
+        if fmt == "tdms":
+            return _tdms(path, options.get("group"))
+        if fmt == "mdf":
+            return _mdf(path)
+        if fmt == "hdf5":
+            return _H5(path, options.get("group"), matlab=False)
+        if fmt == "mat":
+            import h5py
+
+            if h5py.is_hdf5(str(path)):  # MATLAB v7.3
+                return _H5(path, options.get("group"), matlab=True)
+            return _mat_v5(path)
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 — a library's complaint about a bad file, as one line
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{path}: cannot read as {fmt} with {_LIBRARY[fmt]} ({msg})") from None
+    raise InputError(f"{path}: format '{fmt}' has no reader")  # pragma: no cover
+
+
+# --------------------------------------------------------------------------- to the log reader
+
+def needs_foreign_reader(path) -> bool:
+    """True where read_log's own CSV parser cannot take ``path``: a foreign suffix, or
+    a delimited text with a decimal comma, whitespace or '|' delimiter, or a '#' header."""
+    path = Path(path)
+    fmt = SUFFIXES.get(_suffix(path))
+    if fmt is None:
+        return False
+    if fmt != "csv":
+        return True
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8192)
+        if head[:2] == b"\x1f\x8b":
+            with gzip.open(path, "rb") as gz:
+                head = gz.read(8192)
+    except (OSError, EOFError, zlib.error):
+        return False  # read_log reports it
+    text = head.decode("utf-8", "replace")
+    try:
+        fields, delim, decimal, _ = sniff_text(text)
+    except InputError:
+        return False
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    first = next((ln for ln in lines if not ln.lstrip().startswith("#")), "")
+    header_in_comment = bool(re.match(r"\s*[-+.\d]", first))  # '#time,…' right above the data
+    return decimal == "," or delim not in (",", ";", "\t") or header_in_comment
+
+
+def standard_table(path, cmap=None) -> pd.DataFrame:
+    """``path`` as a table with the format's column names and units (a log or an
+    operating-point table), through the channel map ``cmap`` where given."""
+    source = open_source(path, cmap)
+    try:
+        if cmap is not None:
+            return cmap.apply(source, str(path))
+        return source.table()
+    except InputError:
+        raise
+    except (KeyError, ValueError, TypeError) as exc:
+        raise InputError(f"{path}: cannot read its channels ({str(exc).splitlines()[0]})") from None
+
+
+def data_files_in(folder) -> list:
+    """The files of ``folder`` motorid reads: CSV and the binary formats always; other
+    text (.txt, .dat, .exp, .tsv) only where a ``channels.toml`` maps them."""
+    folder = Path(folder)
+    mapped = (folder / "channels.toml").is_file()
+    out = []
+    for q in sorted(folder.iterdir()):
+        fmt = SUFFIXES.get(_suffix(q))
+        if q.is_file() and fmt is not None and (fmt != "text" or mapped):
+            out.append(q)
+    return out
+
+
+def find_channel_map(path):
+    """The channel map beside ``path``: ``<stem>.channels.toml``, else ``channels.toml`` in its folder."""
+    path = Path(path)
+    stem = path.name[:-3] if path.name.endswith(".gz") else path.name
+    stem = stem.rsplit(".", 1)[0]
+    for candidate in (path.with_name(f"{stem}.channels.toml"), path.with_name("channels.toml")):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _write_exact_csv(table: pd.DataFrame, path: Path) -> None:
+    """Table → CSV whose floats read back bit for bit (shortest round-trip text; NaN → empty).
+    Arrow's C++ writer is about ten times faster than pandas'; pandas where Arrow cannot
+    type a column (mixed text and numbers in an extra column)."""
+    import pyarrow as pa
+    import pyarrow.csv as pa_csv
+
+    try:
+        pa_csv.write_csv(pa.Table.from_pandas(table, preserve_index=False), str(path))
+    except (pa.ArrowException, TypeError, ValueError):
+        table.to_csv(path, index=False, lineterminator="\n")  # repr: shortest round-trip text
+
+
+def read_foreign(path, spec=None, channels=None) -> pd.DataFrame:
+    """Read a foreign file into the canonical SI frame of :func:`motorid.io.logs.read_log`.
+
+    channels : a channel map (path or :class:`~motorid.io.channel_map.ChannelMap`);
+        None: the map beside the file (:func:`find_channel_map`), else the file's
+        own column names must follow BENCH_LOG_FORMAT.md.
+    """
+    from motorid.io.channel_map import ChannelMap, load_channel_map
+    from motorid.io.logs import read_log
+
+    path = Path(path)
+    if channels is None:
+        channels = find_channel_map(path)
+    cmap = channels if isinstance(channels, ChannelMap) or channels is None else load_channel_map(channels)
+    table = standard_table(path, cmap)
+    with tempfile.TemporaryDirectory(prefix="motorid-") as tmp:
+        twin = Path(tmp) / (path.name + ".csv")
+        _write_exact_csv(table, twin)
+        try:
+            frame = read_log(twin, spec)
+        except InputError as exc:
+            msg = str(exc).replace(str(twin), str(path))
+            msg = re.sub(r"\bline (\d+)", lambda m: f"row {int(m.group(1)) - 1}", msg)
+            if cmap is not None:
+                msg += f" (read through {cmap.path})"
+            raise InputError(msg) from None
+    frame["file"] = pd.Categorical.from_codes(np.zeros(len(frame), dtype=np.int8),
+                                              categories=pd.Index([str(path)], dtype=object))
+    return frame

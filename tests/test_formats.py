@@ -1,0 +1,377 @@
+"""DAQ formats and channel maps (issue 20, docs/formats.md): real files written by their own
+libraries (scipy.io, h5py, pyarrow, openpyxl, npTDMS, asammdf), read back through a channel
+map, give the CSV path's frame to float precision; a fit on the TDMS copy is the CSV's fit;
+bad files and bad maps are one line and exit 2."""
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from conftest import REPO
+from motorid.cli import main
+from motorid.errors import InputError
+from motorid.io.logs import read_logs
+from motorid.io.spec import load_motor_spec
+
+DEMO = REPO / "synthetic_data" / "demo"
+MOTOR = DEMO / "motor.toml"
+PSI = 6894.757293168361
+ATM_PSI = 101325.0 / PSI
+IN3 = 0.0254 ** 3
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    """A small simulated campaign (constant-speed runs of the demo) as the format's CSV,
+    runs named by number, and its channels as a foreign bench would log them."""
+    df = pd.read_csv(DEMO / "campaign.csv.gz")
+    df = df[df["protocol"] == "constant_speed"]
+    runs = df["run_id"].drop_duplicates().iloc[::5]
+    df = df[df["run_id"].isin(runs)].reset_index(drop=True)
+    df["run_id"] = pd.factorize(df["run_id"])[0] + 1
+    folder = tmp_path_factory.mktemp("campaign")
+    csv = folder / "small.csv"
+    df.to_csv(csv, index=False, float_format="%.17g")
+    raw = {  # foreign names, units and signs
+        "t": df["time_s"].to_numpy(),
+        "RunNo": df["run_id"].to_numpy(dtype=float),
+        "phi": np.deg2rad(df["shaft_angle_deg"].to_numpy()),
+        "n_Motor": -df["speed_rpm"].to_numpy() * 2 * np.pi / 60,  # rad/s, the other direction
+        "T_pump": -df["torque_Nm"].to_numpy(),  # torque into the shaft
+        "pA_abs": df["p_a_bar"].to_numpy() * 1e5 / PSI + ATM_PSI,  # psia
+        "pB": df["p_b_bar"].to_numpy() / 10.0,  # MPa
+        "pCase": df["p_case_bar"].to_numpy(),
+        "QA": df["q_a_lpm"].to_numpy() / 60000.0,  # m³/s
+        "QB": df["q_b_lpm"].to_numpy(),
+        "QL": df["q_case_lpm"].to_numpy() / 3.785411784,  # US gal/min
+        "Toil": df["oil_temp_C"].to_numpy() + 273.15,
+        "mu": df["viscosity_mPas"].to_numpy(),
+    }
+    return csv, raw, folder
+
+
+def map_text(prefix="", time_name=None, fmt_lines=""):
+    p = prefix
+    return f"""{fmt_lines}
+[constants]
+protocol = "constant_speed"
+
+[channels]
+time_s = {{name = "{time_name or p + 't'}", unit = "s"}}
+run_id = {{name = "{p}RunNo"}}
+shaft_angle_deg = {{name = "{p}phi", unit = "rad"}}
+speed_rpm = {{name = "{p}n_Motor", unit = "rad/s", sign = -1}}
+torque_Nm = {{name = "{p}T_pump", unit = "N*m", sign = -1}}
+p_a_bar = {{name = "{p}pA_abs", unit = "psi", absolute = true}}
+p_b_bar = {{name = "{p}pB", unit = "MPa"}}
+p_case_bar = {{name = "{p}pCase", unit = "bar"}}
+q_a_lpm = {{name = "{p}QA", unit = "m3/s"}}
+q_b_lpm = {{name = "{p}QB", unit = "l/min"}}
+q_case_lpm = {{name = "{p}QL", unit = "gpm"}}
+oil_temp_C = {{name = "{p}Toil", unit = "K"}}
+viscosity_mPas = {{name = "{p}mu", unit = "mPa.s"}}
+"""
+
+
+def write_matlab_73(path, arrays: dict, struct: str):
+    """A MATLAB v7.3 MAT-file as MATLAB writes it: HDF5 with a 512-byte user block holding
+    the MAT header, a struct as a group, column-major arrays (stored with axes reversed)."""
+    import h5py
+
+    with h5py.File(path, "w", userblock_size=512) as h5:
+        g = h5.create_group(struct)
+        g.attrs["MATLAB_class"] = np.bytes_("struct")
+        for name, value in arrays.items():
+            value = np.asarray(value, dtype=float)
+            value = value.reshape(-1, 1) if value.ndim == 1 else value  # a column vector
+            ds = g.create_dataset(name, data=value.T)
+            ds.attrs["MATLAB_class"] = np.bytes_("double")
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created by: motorid tests HDF5 schema 1.00 ."
+    with open(path, "r+b") as fh:
+        fh.write(header.ljust(116) + b"\0" * 8 + b"\x00\x02" + b"IM")
+
+
+def write_foreign(kind, raw, folder):
+    """Write ``raw`` with the format's own library; return (file, channel-map text)."""
+    if kind == "mat5":
+        from scipy.io import savemat
+
+        path = folder / "daq_v5.mat"
+        savemat(path, {"daq": {k: v.reshape(-1, 1) for k, v in raw.items()}})
+        return path, map_text("daq.")
+    if kind == "mat73":
+        path = folder / "daq_v73.mat"
+        write_matlab_73(path, raw, "daq")
+        return path, map_text("daq.")
+    if kind == "hdf5":
+        import h5py
+
+        path = folder / "daq.h5"
+        with h5py.File(path, "w") as h5:
+            for k, v in raw.items():
+                h5.create_dataset(f"bench7/signals/{k}", data=v)
+        return path, map_text("", fmt_lines='[file]\ngroup = "bench7/signals"')
+    if kind == "parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        path = folder / "daq.parquet"
+        pq.write_table(pa.table(raw), path)
+        return path, map_text()
+    if kind == "xlsx":
+        path = folder / "daq.xlsx"
+        with pd.ExcelWriter(path, engine="openpyxl") as xw:
+            pd.DataFrame({"note": ["bench 7 export"]}).to_excel(xw, sheet_name="Info", index=False)
+            pd.DataFrame(raw).to_excel(xw, sheet_name="Data", index=False)
+        return path, map_text("", fmt_lines='[file]\nsheet = "Data"')
+    if kind == "tdms":
+        from nptdms import ChannelObject, TdmsWriter
+
+        path = folder / "daq.tdms"
+        with TdmsWriter(str(path)) as w:
+            w.write_segment([ChannelObject("Measurement", k, v) for k, v in raw.items()])
+        return path, map_text("Measurement/")
+    if kind == "mdf":
+        from asammdf import MDF, Signal
+
+        path = folder / "daq.mf4"
+        mdf = MDF(version="4.10")
+        t = raw["t"]
+        mdf.append([Signal(v, t, name=k) for k, v in raw.items() if k != "t"])
+        mdf.save(path, overwrite=True)
+        mdf.close()
+        return path, map_text("", time_name="n_Motor@time")
+    if kind == "csv_semicolon_comma":
+        path = folder / "daq_de.csv"
+        table = pd.DataFrame(raw)
+        table.to_csv(path, sep=";", decimal=",", index=False, float_format="%.17g")
+        return path, map_text()
+    raise AssertionError(kind)
+
+
+KINDS = ["mat5", "mat73", "hdf5", "parquet", "xlsx", "tdms", "mdf", "csv_semicolon_comma"]
+
+
+def assert_same_frame(got: pd.DataFrame, ref: pd.DataFrame):
+    assert len(got) == len(ref)
+    for col in ref.columns:
+        if col in ("file",):
+            continue
+        if ref[col].dtype.kind == "f":
+            scale = np.nanmax(np.abs(ref[col].to_numpy())) if ref[col].notna().any() else 1.0
+            np.testing.assert_allclose(got[col].to_numpy(dtype=float), ref[col].to_numpy(), rtol=1e-12,
+                                       atol=1e-13 * scale, err_msg=col)
+        else:
+            assert got[col].astype(str).tolist() == ref[col].astype(str).tolist(), col
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_each_format_through_a_channel_map_reads_as_its_csv_twin(kind, campaign, tmp_path):
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    if kind == "xlsx":  # openpyxl writes slowly: two runs are enough to show the cells read back
+        keep = raw["RunNo"] <= 2
+        raw = {k: v[keep] for k, v in raw.items()}
+        ref_csv = tmp_path / "ref.csv"
+        pd.read_csv(csv)[keep].to_csv(ref_csv, index=False, float_format="%.17g")
+        csv = ref_csv
+    path, text = write_foreign(kind, raw, tmp_path)
+    cmap = tmp_path / "bench7.toml"
+    cmap.write_text(text)
+    ref = read_logs(csv, spec)
+    got = read_logs(path, spec, channels=cmap)
+    assert_same_frame(got, ref)
+    assert set(got["file"].astype(str)) == {str(path)}
+    # the map beside the file is found without --channels
+    cmap.rename(tmp_path / "channels.toml")
+    assert_same_frame(read_logs(path, spec), ref)
+
+
+def test_decimal_comma_csv_with_the_formats_own_headers_needs_no_map(campaign, tmp_path):
+    csv, _, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    de = tmp_path / "bench_de.csv"
+    pd.read_csv(csv).to_csv(de, sep=";", decimal=",", index=False, float_format="%.17g")
+    assert "," in de.read_text().splitlines()[1]
+    assert_same_frame(read_logs(de, spec), read_logs(csv, spec))
+
+
+def test_fit_on_the_tdms_copy_is_the_fit_on_the_csv(campaign, tmp_path, capsys):
+    csv, raw, _ = campaign
+    path, text = write_foreign("tdms", raw, tmp_path)
+    cmap = tmp_path / "bench7.toml"
+    cmap.write_text(text)
+    assert main(["fit", str(csv), "--motor", str(MOTOR), "--out", str(tmp_path / "a")]) == 0
+    assert main(["fit", str(path), "--channels", str(cmap), "--motor", str(MOTOR),
+                 "--out", str(tmp_path / "b")]) == 0
+    capsys.readouterr()
+    a = json.loads((tmp_path / "a" / "result.json").read_text())["parameters"]
+    b = json.loads((tmp_path / "b" / "result.json").read_text())["parameters"]
+    assert a.keys() == b.keys()
+    fitted = [k for k in a if a[k]["identifiable"]]
+    assert len(fitted) >= 3
+    for k in a:
+        assert a[k]["identifiable"] == b[k]["identifiable"], k
+        if a[k]["identifiable"]:
+            assert math.isclose(a[k]["value"], b[k]["value"], rel_tol=1e-8), k
+            assert math.isclose(a[k]["std"], b[k]["std"], rel_tol=1e-6), k
+
+
+# --------------------------------------------------------------------------- gridded maps
+
+def _grid_map():
+    speed = np.array([500.0, 1000.0, 2000.0, 3000.0])  # rpm
+    dp = np.array([50.0, 200.0, 350.0])  # bar
+    torque = np.outer(np.ones(4), dp) * 80e-6 * 1e5 / (2 * np.pi) * 0.95 - 0.002 * speed[:, None]
+    flow = (speed[:, None] * 80e-3) * (1 + 1e-4 * dp[None, :])  # L/min
+    torque[3, 2] = np.nan
+    flow[3, 2] = np.nan  # a point the bench did not reach
+    return speed, dp, torque, flow
+
+
+GRID_MAP = """
+convention = "pump"
+[constants]
+oil_temp_C = 50.0
+[grid]
+axes = ["speed_rpm", "dp_bar"]
+[channels]
+speed_rpm = {name = "map.n", unit = "rpm"}
+dp_bar = {name = "map.dp", unit = "bar"}
+torque_Nm = {name = "map.T", unit = "N*m"}
+q_a_lpm = {name = "map.Q", unit = "l/min"}
+"""
+
+
+@pytest.mark.parametrize("version", ["v5", "v7.3"])
+def test_gridded_mat_loss_map_gives_one_row_per_point(version, tmp_path):
+    from motorid.io.channel_map import load_channel_map
+    from motorid.io.formats import standard_table
+
+    speed, dp, torque, flow = _grid_map()
+    path = tmp_path / "map.mat"
+    if version == "v5":
+        from scipy.io import savemat
+
+        savemat(path, {"map": {"n": speed, "dp": dp, "T": torque, "Q": flow}})
+    else:
+        write_matlab_73(path, {"n": speed, "dp": dp, "T": torque, "Q": flow}, "map")
+    (tmp_path / "map.toml").write_text(GRID_MAP)
+    table = standard_table(path, load_channel_map(tmp_path / "map.toml"))
+    rows = [(s, d, torque[i, j], flow[i, j]) for i, s in enumerate(speed) for j, d in enumerate(dp)
+            if not np.isnan(torque[i, j])]
+    assert len(table) == len(rows) == 11
+    np.testing.assert_array_equal(table["speed_rpm"], [r[0] for r in rows])
+    np.testing.assert_array_equal(table["dp_bar"], [r[1] for r in rows])
+    # pump convention: torque into the shaft and flow out of the high-pressure port, negated
+    np.testing.assert_allclose(table["torque_Nm"], [-r[2] for r in rows], rtol=1e-15)
+    np.testing.assert_allclose(table["q_a_lpm"], [-r[3] for r in rows], rtol=1e-15)
+    assert (table["oil_temp_C"] == 50.0).all()
+    # a transposed matrix is named, with the fix
+    bad = tmp_path / "map_t.mat"
+    from scipy.io import savemat
+
+    savemat(bad, {"map": {"n": speed, "dp": dp, "T": torque.T, "Q": flow}})
+    with pytest.raises(InputError, match=r"map\.T.*transposed"):
+        standard_table(bad, load_channel_map(tmp_path / "map.toml"))
+
+
+# --------------------------------------------------------------------------- bad files, bad maps
+
+def _cli_fails(args, capsys):
+    rc = main([str(a) for a in args])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    return err
+
+
+@pytest.mark.parametrize("suffix", [".tdms", ".mf4", ".parquet", ".h5", ".mat", ".xlsx"])
+def test_corrupt_file_is_one_line_exit_2(suffix, campaign, tmp_path, capsys):
+    _, _, _ = campaign
+    path = tmp_path / f"broken{suffix}"
+    path.write_bytes(bytes(range(256)) * 7)
+    cmap = tmp_path / "m.toml"
+    cmap.write_text(map_text())
+    err = _cli_fails(["fit", path, "--channels", cmap, "--motor", MOTOR, "--out", tmp_path / "r"], capsys)
+    assert str(path) in err and "cannot read" in err
+    assert not (tmp_path / "r").exists()
+
+
+def test_missing_channel_names_file_and_channel(campaign, tmp_path, capsys):
+    _, raw, _ = campaign
+    raw = {k: v for k, v in raw.items() if k != "QL"}
+    path, text = write_foreign("tdms", raw, tmp_path)
+    cmap = tmp_path / "m.toml"
+    cmap.write_text(text)
+    err = _cli_fails(["fit", path, "--channels", cmap, "--motor", MOTOR, "--out", tmp_path / "r"], capsys)
+    assert str(path) in err and "'Measurement/QL'" in err and "Measurement/QB" in err
+
+
+@pytest.mark.parametrize("edit,words", [
+    (("unit = \"gpm\"", "unit = \"furlongs/fortnight\""), ["[channels] q_case_lpm", "unknown flow unit"]),
+    (("[channels]", "[channels]\nspeed = {name = \"x\", unit = \"rpm\"}"), ["[channels] speed", "unknown column"]),
+    (("[constants]", "colour = \"red\"\n[constants]"), ["unknown key 'colour'"]),
+    (("q_case_lpm = {name = \"QL\", unit = \"gpm\"}", ""), ["[channels] q_case_lpm", "missing"]),
+    (("sign = -1}", "sign = 2}"), ["[channels] speed_rpm", "sign must be 1 or -1"]),
+    (("unit = \"MPa\"}", "unit = \"MPa\", absolute = \"yes\"}"), ["[channels] p_b_bar", "absolute"]),
+    (("protocol = \"constant_speed\"", "protocol = \"wobble\""), ["protocol", "wobble"]),
+])
+def test_bad_channel_map_is_one_line_naming_file_and_key(edit, words, campaign, tmp_path, capsys):
+    csv, raw, _ = campaign
+    path, text = write_foreign("parquet", raw, tmp_path)
+    assert edit[0] in text
+    cmap = tmp_path / "bench7.toml"
+    cmap.write_text(text.replace(edit[0], edit[1], 1))
+    err = _cli_fails(["fit", path, "--channels", cmap, "--motor", MOTOR, "--out", tmp_path / "r"], capsys)
+    assert str(cmap) in err
+    for w in words:
+        assert w in err
+
+
+# --------------------------------------------------------------------------- real recordings
+
+MBARI = REPO / "real_data" / "mbari_f11"
+MBARI_POINTS = REPO / "real_data" / "mbari_f11_points"
+
+
+def test_mbari_recording_reads_through_its_map_with_physical_signs():
+    """The MBARI F11-5 recordings (real_data/mbari_f11): through channels.toml the port-A
+    pressure drives positive speed, flow from ram speed is the displacement flow within a few
+    per cent, and torque from generator current tracks ΔP·V/2π with an efficiency below one."""
+    spec = load_motor_spec(MBARI / "motor.toml")
+    f = read_logs(MBARI / "FrictionIDMovesWithBiasCurr.exp.gz", spec)
+    assert len(f) == 20001 and np.allclose(np.diff(f["time_s"]), 0.02)
+    assert f["theta_rad"].isna().all() and f["q_case_m3_s"].isna().all()
+    w = f["speed_rad_s"].to_numpy()
+    run = np.abs(w) > 300 * 2 * np.pi / 60
+    dp = (f["p_a_Pa"] - f["p_b_Pa"]).to_numpy()
+    ideal_torque = dp * spec.displacement / (2 * np.pi)
+    torque = f["torque_Nm"].to_numpy()
+    slope, _ = np.polyfit(ideal_torque[run], torque[run], 1)
+    assert np.corrcoef(ideal_torque[run], torque[run])[0, 1] > 0.95
+    assert 0.6 < slope < 0.95  # torque efficiency, generator friction and current-to-torque included
+    ideal_flow = w * spec.displacement / (2 * np.pi)
+    ratio = np.median(f["q_a_m3_s"].to_numpy()[run] / ideal_flow[run])
+    assert 0.95 < ratio < 1.05
+    np.testing.assert_allclose(f["q_b_m3_s"], -f["q_a_m3_s"])
+    # points.csv (make_points.py) holds this recording's quasi-steady points, as made from it
+    import importlib.util
+
+    spec_mod = importlib.util.spec_from_file_location("make_points", MBARI_POINTS / "make_points.py")
+    make_points = importlib.util.module_from_spec(spec_mod)
+    spec_mod.loader.exec_module(make_points)
+    mine = make_points.quasi_steady_points(f)
+    shipped = pd.read_csv(MBARI_POINTS / "points.csv")
+    shipped = shipped[shipped["recording"] == "FrictionIDMovesWithBiasCurr"].reset_index(drop=True)
+    assert len(mine) == len(shipped) >= 10
+    for col in ("speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm", "q_a_lpm"):
+        np.testing.assert_allclose(shipped[col], mine[col], rtol=1e-5, atol=1e-5, err_msg=col)
+    # the first release of the 2022-01-28 test logged the lower pressure negated; its own map flips it
+    g = read_logs(MBARI / "original_sign" / "2022.01.28T16.46.31.exp.gz", spec)
+    h = read_logs(MBARI / "2022.01.28T16.46.31_new.exp.gz", spec)
+    n = len(h)
+    np.testing.assert_allclose(g["p_b_Pa"].to_numpy()[:n], h["p_b_Pa"].to_numpy(), atol=1e-9)
