@@ -108,14 +108,14 @@ def test_empirical_term_recovers_a_known_law_and_stays_silent_on_noise():
 # ------------------------------------------------------------------ diagnose on concealed campaigns
 
 
-def _diagnose(name):
+def _diagnose(name, **options):
     from motorid.discrepancy.select import diagnose, diagnosis_document
     from motorid.identify.pipeline import load_campaign
     from motorid.spec import load_motor_spec
 
     spec = load_motor_spec(ROOT / name / "motor.toml")
     _, ds = load_campaign([ROOT / name / "campaign.csv.gz"], spec)
-    return diagnosis_document(diagnose(ds, spec), spec)
+    return diagnosis_document(diagnose(ds, spec, **options), spec)
 
 
 def _truth(name):
@@ -136,7 +136,7 @@ def test_a_law_in_no_catalog_is_left_unexplained_with_an_empirical_term_not_a_st
     other oil temperature: it is refused, nothing is named, and the empirical term finds c/μ.
     (Named causes: the campaigns of benchmarks/bench_causes.py; diagnose is too slow for more here.)"""
     name = "causes_extra_friction_inverse_viscosity"
-    doc = _diagnose(name)
+    doc = _diagnose(name, check_regions=True)
     c_true = _truth(name)["extra"]["friction_inverse_viscosity"]["c"]
     assert doc["mismatch"] is True and doc["mechanisms"] == []
     assert any(r["id"] == "case_pressure_friction" for r in doc["refused_stand_ins"])
