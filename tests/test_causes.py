@@ -108,14 +108,14 @@ def test_empirical_term_recovers_a_known_law_and_stays_silent_on_noise():
 # ------------------------------------------------------------------ diagnose on concealed campaigns
 
 
-def _diagnose(name):
+def _diagnose(name, **options):
     from motorid.discrepancy.select import diagnose, diagnosis_document
     from motorid.identify.pipeline import load_campaign
     from motorid.io.spec import load_motor_spec
 
     spec = load_motor_spec(ROOT / name / "motor.toml")
     _, ds = load_campaign([ROOT / name / "campaign.csv.gz"], spec)
-    return diagnosis_document(diagnose(ds, spec), spec)
+    return diagnosis_document(diagnose(ds, spec, **options), spec)
 
 
 def _truth(name):
@@ -130,14 +130,19 @@ def test_cause_campaigns_never_show_the_truth():
         assert (ROOT / "truths" / f"{name}.toml").exists()
 
 
-@pytest.mark.parametrize("name", ["causes_flow_meter_gain_a"])
-def test_a_miscalibrated_meter_is_named_exactly(name):
-    doc = _diagnose(name)
-    truth = _truth(name)
-    assert doc["mismatch"] is True
-    assert sorted(m["id"] for m in doc["mechanisms"]) == sorted(truth["mechanisms"]), doc["selection"]
-    for m in doc["mechanisms"]:
-        for k, p in m["parameters"].items():
-            true = truth["mechanisms"][m["id"]][k.split(".", 1)[1]]
-            assert abs(p["value"] - true) < max(4 * p["std"], 0.05 * abs(true)), (k, p, true)
-    assert not doc["unexplained"]
+def test_a_law_in_no_catalog_is_left_unexplained_with_an_empirical_term_not_a_stand_in():
+    """Friction ∝ sgn ω/μ (boundary friction as the oil thins) is in no catalog.  Case-pressure
+    friction fits it (the case pressure follows the drain flow, ∝ 1/μ) but does not predict the
+    other oil temperature: it is refused, nothing is named, and the empirical term finds c/μ.
+    (Named causes: the campaigns of benchmarks/bench_causes.py; diagnose is too slow for more here.)"""
+    name = "causes_extra_friction_inverse_viscosity"
+    doc = _diagnose(name, check_regions=True)
+    c_true = _truth(name)["extra"]["friction_inverse_viscosity"]["c"]
+    assert doc["mismatch"] is True and doc["mechanisms"] == []
+    assert any(r["id"] == "case_pressure_friction" for r in doc["refused_stand_ins"])
+    torque = [u for u in doc["unexplained"] if u["channel"] == "torque"]
+    assert torque and {"where", "p_value", "effect", "effect_sigma", "description"} <= set(torque[0])
+    term = torque[0]["empirical_term"]
+    assert term["label"].startswith("empirical term") and term["held_out_gain"] > 0.3
+    coef = {t["term"]: t["coefficient"] for t in term["terms"]}
+    assert abs(coef["sgn ω/μ"] + c_true) < 0.1 * c_true, term["formula"]

@@ -128,7 +128,7 @@ def _structure_key(s) -> tuple:
 
 def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
              alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 3, cv_top: int = 1,
-             max_mechanisms: int = 3, progress=None, check_regions: bool = True) -> Diagnosis:
+             max_mechanisms: int = 3, progress=None, check_regions: bool = False) -> Diagnosis:
     """Find, name and model what the base model leaves out (see module doc)."""
     from motorid.discrepancy.unexplained import extrapolation_check, unexplained_entries
 

@@ -25,13 +25,11 @@ from motorid.export.motor import IdentifiedMotor
 from motorid.io.spec import load_motor_spec
 from motorid.model import MotorSpec
 
-#: mechanisms of the catalog that model a bench sensor's reading, not the motor
-SENSOR_MECHANISMS = frozenset({"torque_offset"})
 
 
 def is_sensor(mech) -> bool:
     """True for a mechanism that changes a sensor's reading rather than the motor's physics."""
-    return mech.id in SENSOR_MECHANISMS or bool(getattr(mech, "sensor", False))
+    return bool(getattr(mech, "sensor", False))
 
 
 def _read_json(path: Path, what: str) -> dict:

@@ -126,6 +126,7 @@ class CatalogMechanism(Mechanism):
     """A catalog entry: a :class:`Mechanism` with a residual signature and words for its fit."""
 
     signature: str = ""  # where its residual shows in the bench data
+    sensor: bool = False  # True: it changes a transducer's reading, not the motor (exports leave it out)
 
     def neutral(self) -> dict:
         """Parameter values at which this mechanism adds exactly nothing."""

@@ -51,6 +51,7 @@ class TorqueOffset(CatalogMechanism):
     sign does not follow the direction of rotation.
     """
 
+    sensor = True  # changes a reading, not the motor: exports leave it out
     id = "torque_offset"
     name = "torque transducer zero offset"
     physics = ("The torque transducer reads a constant offset on top of the true shaft torque, from an "
@@ -145,6 +146,8 @@ def lagged_leakage_change(theta, speed, tau, params, pistons: int):
 class MeterGain(CatalogMechanism):
     """A transducer reading (1 + g) times the true value of one channel [-]."""
 
+    sensor = True  # changes a reading, not the motor: exports leave it out
+
     single_start = True  # linear in g: one start of the fit is enough
 
     def __init__(self, channel: str):
@@ -208,6 +211,8 @@ class MeterGain(CatalogMechanism):
 
 class SensorLag(CatalogMechanism):
     """A transducer that is a first-order filter of time constant τ [s] on one channel."""
+
+    sensor = True  # changes a reading, not the motor: exports leave it out
 
     def __init__(self, channel: str):
         self.channel = channel

@@ -39,7 +39,7 @@ def format_diagnosis(doc: dict) -> str:
             if p["value"] is not None:
                 lines.append(f"  {k} = {p['value']:.4g} ± {(p['std'] or 0):.2g} {p['unit']}")
     for u in doc["unexplained"]:
-        lines.append(f"unexplained: {u['where']}")
+        lines.append(f"unexplained: {u.get('description', u['where'])}")
     for c, v in doc["channels"].items():
         if v["residual_rms_before"] is not None:
             lines.append(f"{c}: residual RMS {v['residual_rms_before']:.4g} → {v['residual_rms_after']:.4g} "
