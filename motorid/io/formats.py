@@ -263,6 +263,9 @@ class _H5:
     def table(self):
         return _columns_of(self.path, {n: self.get(n) for n in self.names()})
 
+    def close(self):
+        self.file.close()
+
 
 def _columns_of(path, arrays: dict) -> pd.DataFrame:
     """Same-length 1-D arrays → DataFrame (a file read without a channel map)."""
@@ -343,6 +346,9 @@ def _mdf(path: Path):
             frame = mdf.to_dataframe(time_from_zero=False)
             frame.insert(0, "time_s", frame.index.to_numpy(dtype=float))
             return frame.reset_index(drop=True)
+
+        def close(self):
+            mdf.close()
 
     return _Mdf()
 
@@ -432,6 +438,9 @@ def standard_table(path, cmap=None) -> pd.DataFrame:
         raise
     except (KeyError, ValueError, TypeError) as exc:
         raise InputError(f"{path}: cannot read its channels ({str(exc).splitlines()[0]})") from None
+    finally:
+        if hasattr(source, "close"):
+            source.close()
 
 
 def data_files_in(folder) -> list:
