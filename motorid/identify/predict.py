@@ -74,7 +74,7 @@ def load_result(result_dir, spec=None):
     return doc, spec, mechanisms
 
 
-def _parameters(doc: dict, spec, mechanisms):
+def fitted_parameters(doc: dict, spec, mechanisms):
     """(values of every parameter, fitted names, their covariance, unidentified names)."""
     params = model.default_parameters(spec)
     for mech in mechanisms:
@@ -107,7 +107,7 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
     from motorid.identify.tables import point_channels, table_samples
 
     doc, spec, mechanisms = result if isinstance(result, tuple) else load_result(result, spec)
-    params, names, cov, unidentified = _parameters(doc, spec, mechanisms)
+    params, names, cov, unidentified = fitted_parameters(doc, spec, mechanisms)
     samples = table_samples(spec, table)
     disp = np.asarray(table.displacement, float)
     disp_arg = disp if table.variable_displacement else None

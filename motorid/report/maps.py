@@ -186,7 +186,7 @@ def rerender_map_report(out_dir, motor=None) -> Path:
     from types import SimpleNamespace
 
     from motorid.errors import InputError
-    from motorid.identify.predict import _parameters, load_result
+    from motorid.identify.predict import fitted_parameters, load_result
     from motorid.identify.tables import point_channels, table_samples
     from motorid.io.tables import read_tables
     from motorid.io.spec import load_motor_spec
@@ -198,7 +198,7 @@ def rerender_map_report(out_dir, motor=None) -> Path:
         raise InputError(f"{Path(out_dir) / 'result.json'}: the table {missing[0] if missing else '(none named)'} "
                          f"it was fitted on is not found")
     table = read_tables(paths, spec)
-    params = _parameters(doc, spec, mechanisms)[0]
+    params = fitted_parameters(doc, spec, mechanisms)[0]
     ch = point_channels(params, spec, table_samples(spec, table),
                         table.displacement if table.variable_displacement else None, mechanisms)
     tf = SimpleNamespace(table=table, table_prediction=dict(zip(("torque", "q_a", "q_b", "q_case"),
