@@ -21,7 +21,8 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-STUDIES = ["bench_speed", "bench_discrepancy", "bench_estimators", "bench_design", "bench_scaling", "bench_foreign"]
+STUDIES = ["bench_speed", "bench_discrepancy", "bench_estimators", "bench_design", "bench_scaling", "bench_foreign",
+           "bench_mapphysics"]
 
 
 def machine() -> str:

@@ -31,6 +31,8 @@ VALUES = {
     "torque_offset.T0": 1.7,
     "case_pressure_friction.K_c": 0.05,
     "pressure_viscosity.alpha": 1.5e-8,
+    "mixed_lubrication.C_m": 0.015, "mixed_lubrication.S_m": 2e-9,  # motorid/physics (issue 20)
+    "pressure_speed_loss.C_x": 4e-10, "filling_loss.C_f": 3e-10, "pump_mode_friction.dKF": -1.2e-3,
 }
 REQUIRED = ["stribeck_friction", "hydrodynamic_torque", "turbulent_leakage", "compressibility_flow",
             "misalignment_ripple", "torque_offset"]

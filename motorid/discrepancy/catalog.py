@@ -480,6 +480,11 @@ class PressureViscosity(CatalogMechanism):
 # ---------------------------------------------------------------------------
 # the catalog
 
+# physics that measured loss maps show (issue 20); imported here, after CatalogMechanism exists
+from motorid.physics.lubrication import MixedLubricationFriction, PressureSpeedTorque  # noqa: E402
+from motorid.physics.mode import PumpModeFriction  # noqa: E402
+from motorid.physics.volumetric import FillingLoss  # noqa: E402
+
 _ALL = (
     StribeckFriction(),
     HydrodynamicTorque(),
@@ -489,6 +494,10 @@ _ALL = (
     TorqueOffset(),
     CasePressureFriction(),
     PressureViscosity(),
+    MixedLubricationFriction(),
+    PressureSpeedTorque(),
+    FillingLoss(),
+    PumpModeFriction(),
 )
 
 #: every mechanism by id (singletons)

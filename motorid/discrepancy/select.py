@@ -115,6 +115,15 @@ def _best_of_starts(dataset, spec, mechanisms, noise, inliers, current, mech) ->
                              initial=best.params_all)
 
 
+def _tied(scored: list, min_evidence: float) -> bool:
+    """Whether the two best candidates both earn their place and neither beats the other
+    by ``min_evidence`` (ΔBIC): mechanisms whose signatures coincide on these data (e.g. a
+    Stribeck curve in speed and one in μω/ΔP where all slow runs share one pressure).  A
+    wrong name is worse than none, so diagnose then names neither."""
+    return (len(scored) > 1 and scored[1].delta_bic > min_evidence
+            and scored[0].delta_bic - scored[1].delta_bic < min_evidence)
+
+
 def _structure_key(s) -> tuple:
     return (s.channel, s.variable, s.order)
 
@@ -142,6 +151,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         for mech in catalog:
             if mech in current_mechs or not channels & set(mech.channels):
                 continue
+            if not getattr(mech, "seen_by", lambda ds: True)(dataset):  # e.g. pump-mode law, no pump runs
+                continue
             fit = _best_of_starts(dataset, spec, current_mechs + [mech], noise, inliers, current.params_all, mech)
             d = current.chi2 - fit.chi2
             k = sum(1 for p in mech.parameters if fit.identifiable.get(p))
@@ -149,6 +160,11 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         if not scored:
             break
         scored.sort(key=lambda c: -c.delta_bic)
+        if _tied(scored, min_evidence):  # two names explain it alike: naming one would be a guess
+            steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
+                           "cv_gain": None, "accepted": False, "tied": i < 2} for i, c in enumerate(scored)])
+            say(f"{scored[0].mechanism.id} and {scored[1].mechanism.id} explain it alike; neither is named")
+            break
         if current_cv is None and folds > 1:
             current_cv = _held_out_chi2(dataset, spec, current_mechs, noise, inliers, current.params_all, fold_runs)
         for cand in scored[:cv_top]:
