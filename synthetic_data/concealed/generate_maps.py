@@ -2,12 +2,14 @@
 
     python synthetic_data/concealed/generate_maps.py
 
-Like generate.py (same base truths, motors and light ISO 4392-1/-2 protocols of
-protocols/): each campaign folder holds only ``campaign.csv.gz`` and
-``motor.toml``; the truth stays in ``truths/NAME.toml``.  Campaigns whose name
-says "pump" add the pump-mode protocol of protocols_maps/ (the dynamometer
-drives the shaft against ΔP), the only way a loss law that differs between
-pump and motor mode can show.
+Like generate.py (same base truths and motors): each campaign folder holds only
+``campaign.csv.gz`` and ``motor.toml``; the truth stays in ``truths/NAME.toml``.
+Protocols: the ISO 4392-1 constant-speed and constant-pressure plans of
+protocols_maps/ (the light ones of protocols/ without the 0.3 rpm runs and without
+startability — none of these mechanisms acts at rest — so that a campaign is half
+the rows and its diagnosis half the time); the pump-mode cases add the pump-mode
+protocol (the dynamometer drives the shaft against ΔP), the only way a loss law that
+differs between pump and motor mode can show.
 """
 
 from __future__ import annotations
@@ -35,8 +37,9 @@ CASES = {
 
 
 def protocols(pump: bool) -> list[Path]:
-    """The light protocols, plus the pump-mode one where asked."""
-    return sorted((HERE / "protocols").glob("*.toml")) + ([PUMP_PROTOCOL] if pump else [])
+    """The running protocols of protocols_maps/, with the pump-mode one where asked."""
+    return [HERE / "protocols_maps" / f"iso4392-1_constant_{kind}.toml" for kind in ("pressure", "speed")] + (
+        [PUMP_PROTOCOL] if pump else [])
 
 
 def main(names=None) -> int:
