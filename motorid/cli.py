@@ -65,7 +65,7 @@ def _load_subcommands():
     import importlib
 
     for mod in ("motorid.bench.cli", "motorid.identify.cli", "motorid.report.cli",
-                "motorid.discrepancy.cli", "motorid.design"):
+                "motorid.discrepancy.cli", "motorid.design", "motorid.identify.predict_cli"):
         try:
             importlib.import_module(mod)
         except ModuleNotFoundError as exc:

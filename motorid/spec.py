@@ -24,6 +24,7 @@ class OilSpec:
     nu100_cSt: float = 6.8
     density15_kg_m3: float = 875.0
     expansion_per_K: float = 6.5e-4
+    temp_C: float | None = None  # oil temperature where an operating-point table gives none [°C]
 
     def viscosity(self, temperature_C):
         """Dynamic viscosity μ at ``temperature_C`` [°C] → [Pa·s]."""
@@ -83,6 +84,8 @@ class MotorSpec:
             ]
             if o.expansion_per_K != OilSpec.expansion_per_K:
                 lines.append(f"expansion_per_K = {o.expansion_per_K!r}")
+            if o.temp_C is not None:
+                lines.append(f"temp_C = {o.temp_C!r}")
         return "\n".join(lines) + "\n"
 
     def as_dict(self) -> dict:
@@ -141,7 +144,9 @@ def parse_motor_spec(data: dict, source: str = "motor spec") -> MotorSpec:
         beta = _number(o, "expansion_per_K", ow, required=False, default=6.5e-4, low=0.0,
                        low_open=False, high=0.01)
         oname = o.get("name", "oil")
-        oil = OilSpec(str(oname), float(nu40), float(nu100), float(rho), float(beta))
+        temp = _number(o, "temp_C", ow, required=False, default=None, low=-273.15, high=1000.0)
+        oil = OilSpec(str(oname), float(nu40), float(nu100), float(rho), float(beta),
+                      None if temp is None else float(temp))
     return MotorSpec(
         name=name,
         pistons=int(pistons),

@@ -39,6 +39,13 @@ def run_diagnose(args) -> int:
     check_logs_exist(args.logs)
     if not 0 < args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
+    from motorid.io.tables import split_logs_and_tables
+
+    logs, tables = split_logs_and_tables(args.logs)
+    if tables:  # operating-point tables: motorid/identify/table_pipeline.py
+        from motorid.identify.table_pipeline import run_table_diagnose
+
+        return run_table_diagnose(args, logs, tables, spec)
     _, dataset = load_campaign(args.logs, spec)
     show = sys.stderr.isatty()
     dg = diagnose(dataset, spec, alpha=args.alpha, min_evidence=args.min_evidence,

@@ -12,7 +12,7 @@ from motorid.errors import InputError
 @subcommand
 def register(sub):
     p = sub.add_parser("fit", help="identify the motor parameters from bench logs")
-    p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files (BENCH_LOG_FORMAT.md)")
+    p.add_argument("logs", nargs="+", help="bench log CSV or CSV.gz files, or operating-point tables (BENCH_LOG_FORMAT.md)")
     p.add_argument("--motor", required=True, help="motor spec TOML")
     p.add_argument("--out", required=True, help="output folder for result.json")
     p.add_argument("--bayes", action="store_true", help="also sample the posterior with emcee")
@@ -49,10 +49,18 @@ def run_fit(args) -> int:
         raise InputError(f"--harmonics must be between 0 and 10, got {args.harmonics}")
     spec = load_motor_spec(args.motor)
     check_logs_exist(args.logs)
+    from motorid.io.tables import split_logs_and_tables
+
+    logs, tables = split_logs_and_tables(args.logs)
+    if tables:  # operating-point tables (no time column): motorid/identify/table_pipeline.py
+        from motorid.identify.table_pipeline import run_table_fit
+
+        return run_table_fit(args, logs, tables, spec)
     res = identify(args.logs, spec, bayes=args.bayes, options=FitOptions(harmonics=args.harmonics),
                    seed=args.seed)
     inputs = {"logs": [str(p) for p in args.logs], "motor": str(args.motor)}
     doc = result_document(res.ls, spec, res.dataset, res.bayes, inputs, res.seconds, res.priors)
+    doc["motor_spec"] = spec.to_toml()  # motorid predict needs nothing else
     out.mkdir(parents=True, exist_ok=True)
     if res.bayes is not None:
         write_chain(res.bayes, out / CHAIN_FILE)

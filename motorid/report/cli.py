@@ -29,6 +29,11 @@ def run_report(args) -> int:
         raise InputError(f"{out}: no such folder")
     check_logs_exist(args.logs or [])
     existed = (out / "report.html").exists()
-    path = write_report(out, logs=args.logs, motor=args.motor)
+    from motorid.report.maps import is_table_result, rerender_map_report
+
+    if is_table_result(out):  # a fit with operating-point tables: report/maps.py
+        path = rerender_map_report(out, motor=args.motor)
+    else:
+        path = write_report(out, logs=args.logs, motor=args.motor)
     print(f"{'replaced' if existed else 'wrote'} {path}")
     return 0

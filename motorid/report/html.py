@@ -122,10 +122,18 @@ def render(rd: ReportData) -> str:
         _uncertainty(rd, figs),
         _efficiency(rd, figs),
         _discrepancy(rd),
+        _comparison(doc),
         _provenance(rd),
         "</body>", "</html>",
     ]
     return "\n".join(parts) + "\n"
+
+
+def _comparison(doc: dict) -> str:
+    """Held-out errors beside the classical loss models, where the fit had tables (report/maps.py)."""
+    from motorid.report.maps import comparison_section
+
+    return comparison_section(doc)
 
 
 def _figures(rd: ReportData, ens) -> dict:

@@ -1,0 +1,173 @@
+"""Held-out errors of loss models on a table: K-fold and extrapolation, the same splits for all.
+
+A *model* here is anything with ``fit(table) -> fitted`` and ``fitted.predict(table) -> {channel: array}``
+(a :class:`~motorid.comparators.base.LossModel`, or :class:`MotoridModel`, motorid's own fit).
+
+- K-fold: the points are split at random (seed 0) into K folds; each fold is predicted from a
+  fit on the others; RMS over all points of the held-out residual, per channel.
+- Extrapolation in pressure: fit on the points with |ΔP| up to the 60th percentile of |ΔP|,
+  predict the rest; in speed: the same with |ω|.
+
+Each RMS is given in SI and as a percentage of the channel's span (max − min of the
+measured values over the whole table).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+CHANNELS = ("torque", "q_a", "q_b", "q_case")
+EXTRAPOLATION_QUANTILE = 0.6
+
+
+def kfold_indices(n: int, k: int = 5, seed: int = 0) -> list:
+    """K disjoint folds covering 0..n−1 (a seeded permutation cut in K near-equal parts)."""
+    k = max(2, min(k, n))
+    return [np.sort(f) for f in np.array_split(np.random.default_rng(seed).permutation(n), k)]
+
+
+def extrapolation_split(values: np.ndarray, quantile: float = EXTRAPOLATION_QUANTILE):
+    """(train, test) masks: train where |values| ≤ their ``quantile``, test above."""
+    a = np.abs(np.asarray(values, dtype=float))
+    cut = np.quantile(a, quantile)
+    train = a <= cut
+    if train.all():  # ties at the cut: keep at least the largest level out
+        train = a < a.max()
+    return train, ~train
+
+
+def rms_errors(measured: dict, predicted: dict, span_from: dict) -> dict:
+    """channel → {"rms": RMS of measured − predicted [SI], "percent_of_span": …, "points": n}."""
+    out = {}
+    for c in CHANNELS:
+        y = np.asarray(measured[c], float)
+        p = np.asarray(predicted.get(c, np.full(y.shape, np.nan)), float)
+        ok = np.isfinite(y)
+        if not ok.any():
+            continue
+        span_y = np.asarray(span_from[c], float)
+        span = float(np.nanmax(span_y) - np.nanmin(span_y)) if np.isfinite(span_y).any() else np.nan
+        good = ok & np.isfinite(p)
+        if good.sum() < ok.sum():
+            out[c] = {"rms": None, "percent_of_span": None, "points": int(ok.sum()),
+                      "note": "the model gives no prediction of this channel"}
+            continue
+        rms = float(np.sqrt(np.mean((y[ok] - p[ok]) ** 2)))
+        out[c] = {"rms": rms, "percent_of_span": 100.0 * rms / span if span > 0 else None, "points": int(ok.sum())}
+    return out
+
+
+def _predict_split(model, table, train, test) -> dict:
+    if hasattr(model, "fit_split"):  # one compiled problem for every fold
+        fitted = model.fit_split(table, train)
+    else:
+        fitted = model.fit(table.subset(train))
+    return fitted.predict(table.subset(test))
+
+
+def held_out(model, table, k: int = 5, seed: int = 0, groups=None) -> dict:
+    """The K-fold and extrapolation errors of ``model`` on ``table`` (see the module's words);
+    with ``groups`` (a label per point, e.g. the recording it came from) also the error of
+    predicting each group from a fit on the others ("leave_one_group_out")."""
+    n = len(table)
+    span = table.measured
+    t0 = time.time()
+    pred = {c: np.full(n, np.nan) for c in CHANNELS}
+    for fold in kfold_indices(n, k, seed):
+        train = np.ones(n, bool)
+        train[fold] = False
+        p = _predict_split(model, table, train, ~train)
+        for c in CHANNELS:
+            pred[c][fold] = p[c]
+    out = {"kfold": rms_errors(table.measured, pred, span), "k": max(2, min(k, n))}
+    for name, values in (("extrapolate_pressure", table.p_a - table.p_b), ("extrapolate_speed", table.speed)):
+        train, test = extrapolation_split(values)
+        if train.sum() < 4 or test.sum() < 1:
+            out[name] = {}
+            continue
+        p = _predict_split(model, table, train, test)
+        out[name] = rms_errors({c: table.measured[c][test] for c in CHANNELS}, p, span)
+    if groups is not None:
+        groups = np.asarray(groups)
+        labels = np.unique(groups)
+        if labels.size >= 2:
+            pred = {c: np.full(n, np.nan) for c in CHANNELS}
+            for g in labels:
+                test = groups == g
+                p = _predict_split(model, table, ~test, test)
+                for c in CHANNELS:
+                    pred[c][test] = p[c]
+            out["leave_one_group_out"] = rms_errors(table.measured, pred, span)
+    out["seconds"] = time.time() - t0
+    return out
+
+
+class MotoridModel:
+    """motorid's own model (the one model, θ-averaged, plus ``mechanisms``) as a comparator:
+    ``fit`` refits the table on the training points (weights 0 elsewhere, one compiled residual)."""
+
+    name = "motorid"
+    reference = "Bartos (1992), MODEL.md; the one model averaged over shaft angle"
+
+    def __init__(self, spec, mechanisms=(), label: str | None = None):
+        self.spec, self.mechanisms = spec, tuple(mechanisms)
+        if label:
+            self.name = label
+        self._cache: dict = {}
+        self._full = None
+
+    def fit(self, table):
+        return self.fit_split(table, np.ones(len(table), bool))
+
+    def fit_split(self, table, train):
+        """Fit on the points where ``train`` holds (the others weigh nothing)."""
+        from motorid.identify.tables import fit_table
+
+        fitted = _FittedMotorid(self)
+        fitted.fit = fit_table(table, self.spec, self.mechanisms, train=train, _cache=self._cache, rounds=1)
+        return fitted
+
+
+class _FittedMotorid:
+    def __init__(self, owner):
+        self.owner = owner
+
+    def predict(self, table) -> dict:
+        from motorid.identify.tables import point_channels, table_samples
+
+        o = self.owner
+        p = self.fit.ls.params_all
+        disp = table.displacement if table.variable_displacement else None
+        ch = point_channels(p, o.spec, table_samples(o.spec, table), disp, o.mechanisms)
+        out = dict(zip(CHANNELS, (np.asarray(v) for v in ch)))
+        ls = self.fit.ls
+        # a channel whose parameters the training points did not identify is not predicted
+        needs = {"torque": ("Kv", "KF", "TFc"), "q_a": ("KL0",), "q_b": ("KL0",), "q_case": ("KL0",)}
+        for c, ks in needs.items():
+            if any(not ls.identifiable.get(k, True) for k in ks):
+                out[c] = np.full(len(table), np.nan)
+        return out
+
+
+def compare(table, spec, comparators=None, mechanisms=(), k: int = 5) -> dict:
+    """The ``comparison`` block: held-out errors of motorid and of every comparator on ``table``."""
+    from motorid.comparators import all_comparators
+
+    models = [MotoridModel(spec, mechanisms, label="motorid" + (" + " + "+".join(m.id for m in mechanisms)
+                                                                if mechanisms else ""))]
+    models += list(comparators if comparators is not None else all_comparators())
+    out = {"method": {"kfold": f"{k}-fold, seeded permutation (seed 0)",
+                      "extrapolation": f"fit on |ΔP| (or |ω|) up to its {int(EXTRAPOLATION_QUANTILE * 100)}th "
+                                       f"percentile, predict the rest",
+                      "units": "rms in SI (N·m, m³/s); percent_of_span: of the channel's measured span"},
+           "models": {}}
+    for m in models:
+        res = held_out(m, table, k)
+        res["reference"] = getattr(m, "reference", "")
+        if getattr(m, "equations", ""):
+            res["equations"] = m.equations
+        out["models"][m.name] = res
+    return out
+

@@ -1,0 +1,179 @@
+"""Predictions at steady operating points from a fit, with 95 % bands (`motorid predict`).
+
+For each point (the columns of an operating-point table, outputs absent) the one
+model averaged over shaft angle (:func:`motorid.identify.tables.point_channels`)
+gives torque, the three flows and the efficiencies (:mod:`motorid.physics.efficiency`).
+
+Bands, both 95 %, normal quantile 1.96:
+
+- ``*_lo95`` / ``*_hi95``: a **confidence band** of the model's value, from the fit's
+  covariance by the delta method: var f = J C Jᵀ with J the JAX Jacobian of the
+  output with respect to the fitted parameters (C rebuilt from result.json's
+  ``std`` and ``correlation``).  It says where the true mean of the motor lies.
+- ``*_pi_lo95`` / ``*_pi_hi95`` (torque and flows): a **prediction band** of a new
+  measurement, var f + σ², σ the fit's noise of that channel (a table fit: the
+  scatter of table points about the model; a log fit: the noise of one reading).
+
+A channel that depends on a parameter the fit could not identify is left empty,
+with the reason in ``note``; one that does not (K_FS, K_s and the K_L(θ)
+harmonics never enter a θ-averaged running point) is predicted.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+
+from motorid import _jaxconfig  # noqa: F401
+from motorid import model
+from motorid.errors import InputError
+from motorid.physics.efficiency import efficiencies, operating_mode
+
+Z95 = 1.959963984540054
+LPM = 1e-3 / 60.0
+_OUT = (("torque", "torque_Nm", 1.0), ("q_a", "q_a_lpm", LPM), ("q_b", "q_b_lpm", LPM), ("q_case", "q_case_lpm", LPM),
+        ("eta_v", "volumetric_efficiency", 1.0), ("eta_hm", "hydromechanical_efficiency", 1.0),
+        ("eta", "overall_efficiency", 1.0))
+
+
+def load_result(result_dir, spec=None):
+    """(result.json document, motor spec, mechanisms) of a fit folder.
+
+    The spec comes from ``spec`` where given, else from the document's ``motor_spec``
+    (the spec's TOML, written by ``motorid fit``), else from the ``inputs.motor`` path."""
+    from motorid.spec import load_motor_spec, parse_motor_spec
+
+    path = Path(result_dir)
+    f = path / "result.json" if path.is_dir() else path
+    if not f.exists():
+        raise InputError(f"{f}: no such file (a folder written by motorid fit is expected)")
+    try:
+        doc = json.loads(f.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{f}: not a readable result.json ({exc})") from None
+    if "parameters" not in doc:
+        raise InputError(f"{f}: not a motorid result (no 'parameters')")
+    if spec is None:
+        if doc.get("motor_spec"):
+            import tomllib
+
+            spec = parse_motor_spec(tomllib.loads(doc["motor_spec"]), f"{f} motor_spec")
+        elif doc.get("inputs", {}).get("motor") and Path(doc["inputs"]["motor"]).exists():
+            spec = load_motor_spec(doc["inputs"]["motor"])
+        else:
+            raise InputError(f"{f}: the motor spec is neither stored in it nor found at its inputs.motor; "
+                             f"give --motor")
+    from motorid.discrepancy.catalog import get
+
+    mechanisms = tuple(get(m) for m in doc.get("fit", {}).get("mechanisms", []))
+    return doc, spec, mechanisms
+
+
+def _parameters(doc: dict, spec, mechanisms):
+    """(values of every parameter, fitted names, their covariance, unidentified names)."""
+    params = model.default_parameters(spec)
+    for mech in mechanisms:
+        params.update(mech.initial())
+    unidentified = []
+    for k, e in doc["parameters"].items():
+        if e.get("identifiable") and e.get("value") is not None:
+            params[k] = float(e["value"])
+        else:
+            unidentified.append(k)
+    names = [k for k in doc.get("correlation", {}).get("names", []) if k in params and k not in unidentified]
+    corr = np.asarray(doc.get("correlation", {}).get("matrix") or np.zeros((0, 0)), dtype=float)
+    all_names = doc.get("correlation", {}).get("names", [])
+    idx = [all_names.index(k) for k in names]
+    corr = corr[np.ix_(idx, idx)] if len(idx) else np.zeros((0, 0))
+    std = np.array([float(doc["parameters"][k]["std"] or 0.0) for k in names])
+    cov = np.nan_to_num(corr) * np.outer(std, std)
+    return params, names, cov, unidentified
+
+
+def predict_points(result, table, spec=None) -> pd.DataFrame:
+    """Predictions at every point of ``table`` (:class:`motorid.io.tables.PointTable`) from a fit.
+
+    result : a fit folder, a result.json path, or a (doc, spec, mechanisms) tuple from
+    :func:`load_result`.  Returns one row per point: ``point_id`` where the table has
+    it, the inputs, each output with its confidence band (``_lo95``, ``_hi95``) and,
+    for torque and flows, its prediction band (``_pi_lo95``, ``_pi_hi95``), the
+    operating ``mode`` (motor / pump / none) and a ``note``.
+    """
+    from motorid.identify.tables import point_channels, table_samples
+
+    doc, spec, mechanisms = result if isinstance(result, tuple) else load_result(result, spec)
+    params, names, cov, unidentified = _parameters(doc, spec, mechanisms)
+    samples = table_samples(spec, table)
+    disp = np.asarray(table.displacement, float)
+    disp_arg = disp if table.variable_displacement else None
+
+    def outputs(p):
+        ch = point_channels(p, spec, samples, disp_arg, mechanisms)
+        ev, ehm, e = efficiencies(ch.torque, ch.q_a, ch.q_b, jnp.asarray(table.speed), jnp.asarray(table.p_a),
+                                  jnp.asarray(table.p_b), jnp.asarray(disp))
+        return jnp.stack([ch.torque, ch.q_a, ch.q_b, ch.q_case, ev, ehm, e])
+
+    outputs = jax.jit(outputs)
+    base = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
+    value = np.asarray(outputs(base))
+    var = np.zeros_like(value)
+    if names:
+        std = np.sqrt(np.clip(np.diag(cov), 0, None))
+        std = np.where(std > 0, std, 1.0)
+
+        def of_z(z):
+            p = dict(base)
+            for i, k in enumerate(names):
+                p[k] = base[k] + z[i] * std[i]
+            return outputs(p)
+
+        J = np.asarray(jax.jit(jax.jacfwd(of_z))(jnp.zeros(len(names))))  # (7, N, k)
+        C = cov / np.outer(std, std)
+        var = np.einsum("onk,kl,onl->on", J, C, J)
+    # channels that lean on a parameter the fit did not identify: left empty
+    blank = np.zeros(value.shape[0], bool)
+    why = {}
+    for k in unidentified:
+        if k not in params:
+            continue
+        p2 = dict(base)
+        p2[k] = base[k] * 2.0 + (0.1 if float(params[k]) == 0.0 else 0.0)
+        moved = np.any(np.abs(np.asarray(outputs(p2)) - value) > 1e-9 * (np.abs(value) + 1e-300), axis=1)
+        for i in np.flatnonzero(moved & np.any(np.isfinite(value), axis=1)):
+            blank[i] = True
+            why.setdefault(_OUT[i][1], k)
+    noise = (doc.get("table", {}).get("noise") or doc.get("noise") or {})
+    out = pd.DataFrame()
+    if table.has_point_id:
+        out["point_id"] = table.point_id
+    out["speed_rpm"] = table.speed * 60 / (2 * np.pi)
+    out["p_a_bar"], out["p_b_bar"] = table.p_a / 1e5, table.p_b / 1e5
+    out["p_case_bar"] = table.p_case / 1e5
+    out["viscosity_mPas"] = table.viscosity * 1e3
+    if table.variable_displacement:
+        out["displacement_cm3"] = disp * 1e6
+    out["mode"] = operating_mode(table.speed, table.p_a, table.p_b)
+    for i, (c, col, unit) in enumerate(_OUT):
+        v = np.where(blank[i], np.nan, value[i]) / unit
+        half = Z95 * np.sqrt(var[i]) / unit
+        out[col], out[col + "_lo95"], out[col + "_hi95"] = v, v - half, v + half
+        if i < 4:
+            sigma = (noise.get(c) or {}).get("sigma")
+            if sigma is not None:
+                half_p = Z95 * np.sqrt(var[i] + float(sigma) ** 2) / unit
+                out[col + "_pi_lo95"], out[col + "_pi_hi95"] = v - half_p, v + half_p
+    note = "; ".join(f"{col} empty: it depends on {k}, not identified by the fit" for col, k in why.items())
+    out["note"] = note
+    return out
+
+
+def write_predictions(frame: pd.DataFrame, path) -> Path:
+    """The predictions as CSV, written whole or not at all."""
+    from motorid._atomic import write_bytes_atomic
+
+    return write_bytes_atomic(path, frame.to_csv(index=False, float_format="%.8g", lineterminator="\n").encode())

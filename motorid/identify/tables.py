@@ -1,0 +1,441 @@
+"""Fitting operating-point tables (steady loss maps), alone or jointly with bench logs.
+
+A table point is a steady operating point averaged over shaft angle.  Its model
+is the one model, :func:`motorid.model.predict`, averaged over θ: the mean over
+K angles evenly spread over a whole revolution (K = max(64, 2n(M+2)), M the order
+of the K_L(θ) series).  It is exact: the parameter-free S(θ) = Σ_{cos θᵢ>0} cos θᵢ,
+in which the pressure torque and the swept flow are linear, is given its exact
+mean n/π (so that they average to DΔP/2π and Dω/2π, Eq. 16, 43; a grid mean of
+S(θ)'s kinks would miss by 5·10⁻⁶ with 64 angles), and every other term that
+varies with θ is a trigonometric polynomial of order below K (the K_L(θ)
+harmonics of order m·n; a mechanism's shaft-order terms), whose grid mean is its
+exact mean.
+
+What a table cannot identify is reported as such, never given a number:
+K_FS and K_s (no breakaway in a steady table), the K_L(θ) harmonics (no shaft
+angle), and whatever a missing output channel would have given
+(:func:`table_coverage_reasons`, then the null space of the weighted Jacobian).
+
+Noise: each output channel c has one level s_c estimated from the residuals
+(a table has no first differences to estimate it from beforehand), times a
+relative factor per point from the table's ``*_std_*`` / ``n_samples`` columns
+where it has them (:class:`motorid.io.tables.PointTable`).  The fit is a
+bounded trust-region least squares (scipy) with the JAX Jacobian; the table
+part is linear in the base parameters, so it converges in a few steps, and the
+K-fold refits reuse one compiled residual (held-out points get weight 0).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from motorid import _jaxconfig  # noqa: F401
+from motorid import model
+from motorid.identify.least_squares import FitResult, coverage_reasons
+from motorid.model import Channels
+
+TABLE_CHANNELS = ("torque", "q_a", "q_b", "q_case")
+THETA_POINTS = 64  # at least this many shaft angles over a revolution in the θ-average of a table point
+NO_BREAKAWAY = ("an operating-point table holds running points only, no breakaway: static friction needs "
+                "startability runs (ISO 4392-2)")
+NO_ANGLE = ("an operating-point table holds means over shaft angle: the K_L(θ) harmonics need flows "
+            "recorded over shaft angle at low constant speed")
+
+
+# ----------------------------------------------------------------------------- the θ-averaged model
+
+
+def table_samples(spec, table, points: int | None = None):
+    """:class:`~motorid.model.Samples` of shape (points of the table, K angles over a revolution),
+    S(θ) set to its exact mean n/π (see the module's words)."""
+    if points is None:
+        points = max(THETA_POINTS, 2 * spec.pistons * (spec.leak_harmonics + 2))
+    theta = 2.0 * np.pi * (np.arange(points) + 0.5) / points
+    n = len(table)
+    col = lambda x: np.asarray(x, dtype=float)[:, None]  # noqa: E731
+    s = model.make_samples(spec, np.broadcast_to(theta, (n, points)).copy(), col(table.speed), col(table.p_a),
+                           col(table.p_b), col(table.p_case), col(table.viscosity), acceleration=0.0,
+                           direction=np.sign(col(table.speed)), temperature=col(table.temperature))
+    # S(θ)'s exact mean over a revolution (MODEL.md: mean torque DΔP/2π = (D/2n)·ΔP·S̄)
+    return s._replace(port_sum=np.full_like(s.port_sum, spec.pistons / np.pi))
+
+
+def point_channels(params: dict, spec, samples, displacement=None, mechanisms: Sequence = ()) -> Channels:
+    """The model's channels at each table point: :func:`motorid.model.predict` averaged over θ.
+
+    params : parameters (SI); samples : from :func:`table_samples`;
+    displacement : per-point D [m³/rev] of a variable unit, or None (the spec's).
+    Returns torque [N·m], q_a, q_b, q_case [m³/s], each over the points.
+    """
+    if displacement is not None:
+        spec = dataclasses.replace(spec, displacement=jnp.asarray(displacement, dtype=jnp.float64)[:, None])
+    ch = model.predict(params, spec, samples, mechanisms)
+    return Channels(*(jnp.mean(c, axis=-1) for c in ch))
+
+
+# ----------------------------------------------------------------------------- what a table identifies
+
+
+def _spread(x) -> float:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size < 2:
+        return 0.0
+    lo, hi = np.percentile(x, [2, 98])
+    return float((hi - lo) / max(np.max(np.abs(x)), 1e-300))
+
+
+def table_coverage_reasons(table, spec, names: Sequence[str]) -> dict:
+    """Reasons why the table cannot identify a parameter (name → words), from what it holds."""
+    m = table.measured
+    reasons = {}
+    tq = np.isfinite(m["torque"])
+    if tq.sum() < 3:
+        for k in ("Kv", "KF", "TFc"):
+            reasons[k] = "the table has no torque column (or fewer than 3 torque readings)"
+    else:
+        if _spread(np.abs(table.viscosity * table.speed)[tq]) < 0.05:
+            reasons["Kv"] = ("torque at a single speed·viscosity level: viscous and Coulomb friction cannot be "
+                             "told apart")
+        if _spread((table.displacement * (table.p_a + table.p_b))[tq]) < 0.05:
+            msg = "torque at a single port-pressure sum P_A+P_B: K_F and T_Fc cannot be told apart"
+            reasons["KF"] = reasons["TFc"] = msg
+    for k in ("KFS", "Ks"):
+        reasons[k] = NO_BREAKAWAY
+    flows = {c: np.isfinite(m[c]) for c in ("q_a", "q_b", "q_case")}
+    case_info = flows["q_case"] | (flows["q_a"] & flows["q_b"])
+    if case_info.sum() < 3:
+        reasons["KL0"] = "the table has no case-drain flow (nor both port flows)"
+    port = flows["q_a"] | flows["q_b"]
+    if port.sum() < 3:
+        reasons["KAB"] = "the table has no port flow (K_AB shows only in the port flows)"
+    elif np.all(np.abs(table.dp[port]) < 1e3):
+        reasons["KAB"] = "port flows only at zero pressure difference"
+    for name in names:
+        if name.startswith("KL_"):
+            reasons[name] = NO_ANGLE
+    return {k: v for k, v in reasons.items() if k in names}
+
+
+def _null_space(J: np.ndarray, free: list, tol: float = 1e-7) -> dict:
+    """Parameters in directions the weighted Jacobian (columns over ``free``) cannot see."""
+    norms = np.linalg.norm(J, axis=0)
+    out = {k: "the table's channels do not depend on it" for k, nrm in zip(free, norms)
+           if not (np.isfinite(nrm) and nrm > 0)}
+    cols = [i for i, k in enumerate(free) if k not in out]
+    if not cols:
+        return out
+    _, s, vt = np.linalg.svd(J[:, cols] / norms[cols], full_matrices=False)
+    for j in np.flatnonzero(s < tol * s.max()):
+        involved = [free[cols[i]] for i in np.flatnonzero(np.abs(vt[j]) > 0.2)]
+        for k in involved:
+            others = [o for o in involved if o != k]
+            out.setdefault(k, ("cannot be told apart from " + ", ".join(others) + " with this table") if others
+                           else "the table does not determine it")
+    return out
+
+
+# ----------------------------------------------------------------------------- the problem
+
+
+@dataclass
+class TableFit:
+    """A fit with operating-point tables: the :class:`FitResult` (``ls``, as from the logs'
+    fit) and the table's own part: noise levels, predictions, residuals over the points."""
+
+    ls: FitResult
+    table: object
+    table_noise: dict  # channel → s_c [SI], None where the table has no such channel
+    table_prediction: dict  # channel → θ-averaged model at each point [SI]
+    table_residuals: dict  # channel → measured − model [SI]
+    table_sigma: dict  # channel → σ of each point [SI]
+    seconds: float = 0.0
+    dataset: object = None
+    notes: list = field(default_factory=list)
+
+
+class _Residual:
+    """The weighted residual of tables (and logs) as a function of the scaled free parameters.
+
+    One compiled function per set of free parameters; the weights are arguments, so that
+    refits on other folds or with other noise levels reuse it."""
+
+    def __init__(self, spec, table, names, free, held, scales, mechanisms, dataset=None):
+        self.spec, self.free, self.held = spec, list(free), dict(held)
+        self.mechanisms = tuple(mechanisms)
+        self.scales = np.asarray(scales, dtype=float)
+        self.samples = table_samples(spec, table) if table is not None else None
+        disp = None
+        if table is not None and table.variable_displacement:
+            disp = np.asarray(table.displacement, dtype=float)
+        self.disp = disp
+        self.obs = {c: np.nan_to_num(np.asarray(table.measured[c], dtype=float)) for c in TABLE_CHANNELS} \
+            if table is not None else {}
+        self.dataset = dataset
+        self.log_obs = {}
+        if dataset is not None:
+            if dataset.n_running:
+                self.log_obs.update({c: np.nan_to_num(np.asarray(dataset.measured[c], dtype=float))
+                                     for c in TABLE_CHANNELS})
+            if dataset.n_events:
+                self.log_obs["breakaway"] = np.nan_to_num(np.asarray(dataset.held_torque, dtype=float))
+
+        def params(x):
+            p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()}
+            for i, k in enumerate(self.free):
+                p[k] = x[i] * self.scales[i]
+            return p
+
+        def table_pred(x):
+            ch = point_channels(params(x), spec, self.samples, self.disp, self.mechanisms)
+            return dict(zip(TABLE_CHANNELS, ch))
+
+        def log_pred(x):
+            out = {}
+            p = params(x)
+            if dataset is not None and dataset.n_running:
+                ch = model.predict(p, spec, dataset.running, self.mechanisms)
+                out.update(zip(TABLE_CHANNELS, ch))
+            if dataset is not None and dataset.n_events:
+                out["breakaway"] = model.predict_breakaway(p, spec, dataset.events, self.mechanisms)
+            return out
+
+        def residual(x, w_table, w_logs):
+            parts = []
+            if table is not None:
+                pred = table_pred(x)
+                parts += [(self.obs[c] - pred[c]) * w_table[c] for c in TABLE_CHANNELS]
+            if self.log_obs:
+                pred = log_pred(x)
+                parts += [(self.log_obs[c] - pred[c]) * w_logs[c] for c in self.log_obs]
+            return jnp.concatenate(parts)
+
+        self.params = params
+        self.table_pred = jax.jit(table_pred) if table is not None else None
+        self.residual = jax.jit(residual)
+        self.jacobian = jax.jit(jax.jacfwd(residual))
+
+    def solve(self, x0, w_table, w_logs, lower):
+        from scipy.optimize import least_squares
+
+        fun = lambda x: np.asarray(self.residual(x, w_table, w_logs))  # noqa: E731
+        jac = lambda x: np.asarray(self.jacobian(x, w_table, w_logs))  # noqa: E731
+        x0 = np.maximum(np.asarray(x0, dtype=float), lower + 1e-12)
+        sol = least_squares(fun, x0, jac=jac, bounds=(lower, np.inf), method="trf", x_scale="jac",
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200)
+        return sol.x, int(sol.nfev), bool(sol.success), jac(sol.x)
+
+
+def _linear_start(spec, table, names, mechanisms) -> dict:
+    """Starting values from the θ-averaged base model, which is linear in K_v, K_F, T_Fc
+    (torque) and K_L0, K_AB (flows): a least-squares solve of each part on the table."""
+    start = model.default_parameters(spec)
+    if table is None:
+        return start
+    D, mu, w = table.displacement, table.viscosity, table.speed
+    sgn = np.sign(w)
+    t_ideal = D * table.dp / (2 * np.pi)
+    y = table.measured["torque"] - t_ideal
+    ok = np.isfinite(y)
+    if ok.sum() >= 3:
+        A = np.column_stack([-D * mu * w, -D * (table.p_a + table.p_b) * sgn, -sgn])[ok]
+        coef = np.linalg.lstsq(A, y[ok], rcond=None)[0]
+        for k, c in zip(("Kv", "KF", "TFc"), coef):
+            if c > 0:
+                start[k] = float(c)
+    swept = D * w / (2 * np.pi)
+    rows, rhs = [], []
+    la, lb = (table.p_a - table.p_case) / mu, (table.p_b - table.p_case) / mu
+    ab = table.dp / mu
+    for c, ideal, a_kl, a_ab in (("q_a", swept, la, ab), ("q_b", -swept, lb, -ab), ("q_case", 0.0, la + lb, 0 * ab)):
+        yy = table.measured[c] - ideal
+        ok = np.isfinite(yy)
+        if ok.any():
+            rows.append(np.column_stack([a_kl, a_ab])[ok])
+            rhs.append(yy[ok])
+    if rows:
+        A, b = np.vstack(rows), np.concatenate(rhs)
+        scale = np.linalg.norm(A, axis=0)
+        scale[scale == 0] = 1.0
+        coef = np.linalg.lstsq(A / scale, b, rcond=None)[0] / scale
+        for k, c in zip(("KL0", "KAB"), coef):
+            if c > 0:
+                start[k] = float(c)
+    for mech in mechanisms:
+        start.update(mech.initial())
+    return start
+
+
+def _initial_sigma(y: np.ndarray) -> float:
+    y = y[np.isfinite(y)]
+    if y.size == 0:
+        return 1.0
+    return float(max(1e-3 * (np.max(y) - np.min(y)), 1e-6 * np.max(np.abs(y)), 1e-300))
+
+
+def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: FitResult | None = None,
+              harmonics: int | None = None, train=None, rounds: int = 3, fixed_noise: dict | None = None,
+              _cache: dict | None = None) -> TableFit:
+    """Fit the model (plus ``mechanisms``) to operating-point tables, alone or with logs.
+
+    table : :class:`motorid.io.tables.PointTable` (None: logs only is not this function's job)
+    spec : :class:`motorid.spec.MotorSpec`; mechanisms : extra physics whose parameters are fitted too
+    dataset, log_fit : the logs' extracted :class:`~motorid.identify.extract.Dataset` and their own
+        least-squares fit (its per-sample noise and inliers weight the logs in the joint fit)
+    train : bool mask over the table points to fit on (the rest get weight 0: K-fold refits)
+    fixed_noise : channel → s_c to hold instead of estimating it (a refit on a fold)
+    Returns a :class:`TableFit`.
+    """
+    t0 = time.time()
+    M = spec.leak_harmonics if harmonics is None else harmonics
+    names = model.parameter_names(M)
+    for mech in mechanisms:
+        names += list(mech.parameters)
+    reasons = table_coverage_reasons(table, spec, names)
+    if dataset is not None:
+        from_logs = coverage_reasons(dataset, spec, names)
+        reasons = {k: f"{v}; and from the logs: {from_logs[k]}" for k, v in reasons.items() if k in from_logs}
+    n = len(table)
+    train = np.ones(n, bool) if train is None else np.asarray(train, bool)
+    start = _linear_start(spec, table.subset(train), names, mechanisms)
+    if log_fit is not None:
+        start.update({k: v for k, v in log_fit.params_all.items() if v is not None and k in names})
+    free = [k for k in names if k not in reasons]
+    has = {c: np.isfinite(table.measured[c]) & train for c in TABLE_CHANNELS}
+    sigma_c = {c: _initial_sigma(table.measured[c][has[c]]) for c in TABLE_CHANNELS}
+    if fixed_noise:
+        sigma_c.update({c: v for c, v in fixed_noise.items() if v})
+    w_logs = {}
+    if dataset is not None and log_fit is not None:
+        for c in TABLE_CHANNELS + ("breakaway",):
+            if c in log_fit.sigma:
+                ok = np.asarray(log_fit.inliers[c], bool) & np.isfinite(np.asarray(log_fit.residuals[c], float))
+                w_logs[c] = np.where(ok, 1.0 / np.asarray(log_fit.sigma[c], float), 0.0)
+    steps, converged = 0, True
+    cache = {} if _cache is None else _cache
+
+    def problem(free_now):
+        key = (tuple(free_now), id(table), id(dataset))
+        if key not in cache:
+            held = {k: float(start.get(k, 0.0) or 0.0) for k in names if k not in free_now}
+            scales = [abs(model.parameter_info(k, mechanisms).typical) or 1.0 for k in free_now]
+            cache[key] = _Residual(spec, table, names, free_now, held, scales, mechanisms, dataset)
+        return cache[key]
+
+    def weights():
+        return {c: np.where(has[c], 1.0 / (sigma_c[c] * table.relative_sigma[c]), 0.0) for c in TABLE_CHANNELS}
+
+    values = {k: float(start[k]) for k in free}
+    for round_ in range(max(rounds, 1) + 1):
+        prob = problem(free)
+        lower = np.array([0.0 if model.parameter_info(k, mechanisms).positive else -np.inf for k in free])
+        x0 = np.array([values[k] for k in free]) / prob.scales
+        x, nfev, ok, J = prob.solve(x0, weights(), w_logs, lower)
+        steps += nfev
+        converged = ok
+        values = {k: float(x[i] * prob.scales[i]) for i, k in enumerate(free)}
+        weak = _null_space(J, free) if free else {}
+        if weak:
+            for k in weak:
+                reasons[k] = weak[k]
+            free = [k for k in free if k not in weak]
+            values = {k: values[k] for k in free}
+            continue
+        if round_ == rounds or fixed_noise:
+            break
+        # the noise level of each channel from the residuals (degrees of freedom shared out by count)
+        pred = {c: np.asarray(v) for c, v in prob.table_pred(x).items()}
+        n_all = sum(int(has[c].sum()) for c in TABLE_CHANNELS) + sum(int((w > 0).sum()) for w in w_logs.values())
+        for c in TABLE_CHANNELS:
+            k = int(has[c].sum())
+            if k == 0:
+                continue
+            r = (table.measured[c] - pred[c])[has[c]] / table.relative_sigma[c][has[c]]
+            dof = max(k - len(free) * k / max(n_all, 1), 1.0)
+            sigma_c[c] = float(max(np.sqrt(np.sum(r**2) / dof), 1e-12 * max(np.max(np.abs(table.measured[c][has[c]])), 1e-300)))
+
+    prob = problem(free)
+    x = np.array([values[k] for k in free]) / prob.scales if free else np.zeros(0)
+    pred = {c: np.asarray(v) for c, v in prob.table_pred(x).items()}
+    w = weights()
+    r_all = np.asarray(prob.residual(x, w, w_logs))
+    chi2 = float(r_all @ r_all)
+    used_t = {c: int(has[c].sum()) for c in TABLE_CHANNELS}
+    n_res = sum(used_t.values()) + sum(int((v > 0).sum()) for v in w_logs.values())
+    dof = max(n_res - len(free), 1)
+    if free:
+        J = np.asarray(prob.jacobian(x, w, w_logs))
+        cov_x = np.linalg.pinv(J.T @ J)
+        cov = cov_x * np.outer(prob.scales, prob.scales)
+        if chi2 / dof > 1.0:
+            cov = cov * (chi2 / dof)
+        std = np.sqrt(np.clip(np.diag(cov), 0, None))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = cov / np.outer(std, std)
+    else:
+        cov = corr = np.zeros((0, 0))
+        std = np.zeros(0)
+    out_values, out_std, ident = {}, {}, {}
+    for k in names:
+        if k in free:
+            i = free.index(k)
+            out_values[k], out_std[k], ident[k] = values[k], float(std[i]), True
+        else:
+            out_values[k], out_std[k], ident[k] = None, None, False
+    warnings = []
+    for k in free:
+        info = model.parameter_info(k, mechanisms)
+        if info.positive and values[k] < 1e-4 * abs(info.typical):
+            warnings.append(f"{k} is at its lower bound 0: the data show no sign of it")
+        elif std[free.index(k)] > abs(values[k]):
+            warnings.append(f"{k}: standard error exceeds the value; the data barely constrain it")
+    if not converged:
+        warnings.append("the table fit stopped before converging (scipy least_squares, max_nfev)")
+    resid = {c: table.measured[c] - pred[c] for c in TABLE_CHANNELS}
+    sig = {c: sigma_c[c] * table.relative_sigma[c] for c in TABLE_CHANNELS}
+    tnoise = {c: (sigma_c[c] if np.isfinite(table.measured[c]).any() else None) for c in TABLE_CHANNELS}
+    if log_fit is not None:
+        noise, noise_by_run, outliers = dict(log_fit.noise), dict(log_fit.noise_by_run), dict(log_fit.outliers)
+        used = {c: int(log_fit.used.get(c, 0)) + used_t.get(c, 0) for c in set(log_fit.used) | set(used_t)}
+        residuals = dict(log_fit.residuals)
+        sigma, inliers = dict(log_fit.sigma), dict(log_fit.inliers)
+    else:
+        noise = {c: v for c, v in tnoise.items() if v is not None}
+        noise_by_run = {c: np.array([v]) for c, v in noise.items()}
+        outliers = {c: 0 for c in noise}
+        used = {c: used_t[c] for c in noise}
+        residuals = {c: resid[c] for c in noise}
+        sigma = {c: sig[c] for c in noise}
+        inliers = {c: has[c] for c in noise}
+    params_all = {k: float(start.get(k, 0.0) or 0.0) for k in names}
+    params_all.update(values)
+    ls = FitResult(names=names, free=list(free), values=out_values, std=out_std, covariance=cov, correlation=corr,
+                   identifiable=ident, reasons={k: v for k, v in reasons.items() if k in names}, noise=noise,
+                   noise_by_run=noise_by_run, outliers=outliers, used=used, chi2=chi2, dof=dof, steps=steps,
+                   converged=converged, warnings=warnings, residuals=residuals, sigma=sigma, inliers=inliers,
+                   params_all=params_all, mechanisms=tuple(mechanisms), problem=None)
+    return TableFit(ls, table, tnoise, pred, resid, sig, time.time() - t0, dataset)
+
+
+def table_document(tf: TableFit) -> dict:
+    """The ``table`` block of result.json: what the tables gave (noise per channel, weights, points)."""
+    t = tf.table
+    return {
+        "points": len(t),
+        "files": sorted(set(map(str, t.file))),
+        "channels": t.channels(),
+        "theta_average": "model.predict averaged over a revolution: S(θ) at its exact mean n/π, the rest over "
+                         "K ≥ 64 evenly spread shaft angles (exact for trigonometric terms of order < K)",
+        "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s"} for c, v in tf.table_noise.items()},
+        "weights_from": dict(t.weights_from),
+        "variable_displacement": bool(t.variable_displacement),
+        "residual_rms": {c: (float(np.sqrt(np.nanmean(r**2))) if np.isfinite(r).any() else None)
+                         for c, r in tf.table_residuals.items()},
+    }

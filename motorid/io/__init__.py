@@ -1,0 +1,1 @@
+"""Everything at the edge: files in, SI arrays out."""

@@ -1,0 +1,380 @@
+"""Operating-point tables (BENCH_LOG_FORMAT.md, "Operating-point tables"): reading.
+
+One row per steady operating point (an ISO 4409-style loss map or efficiency
+test).  A file is a table when its header has no ``time_s`` column.  Units,
+suffixes and signs are those of the bench logs; the values are converted to SI
+here, at the edge, and nowhere else.
+
+Columns: ``point_id`` (optional text), ``speed_rpm`` (required), ``p_a_bar`` and
+``p_b_bar`` or ``dp_bar`` (P_A − P_B, with P_B = 0), ``p_case_bar`` (optional, 0),
+the outputs ``torque_Nm``, ``q_a_lpm``, ``q_b_lpm``, ``q_case_lpm`` (each
+optional; a fit needs one), ``oil_temp_C`` / ``viscosity_mPas`` (optional; the
+spec's ``[oil] temp_C`` where both are absent), ``displacement_cm3`` (per-point
+displacement of a variable unit, per revolution), ``n_samples`` and
+``<output>_std_<unit>`` (averaging count and spread: relative weights).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from motorid.errors import InputError
+from motorid.logs import (_BY_SI, _HEADERS, _NA_STRINGS, _PRESSURE_UNITS, _oil_viscosity, _parse_body,
+                          _read_text, _split_header, normalize_header)
+
+#: the outputs a table may give, SI column of the logs → channel name of the fit
+OUTPUTS = {"torque_Nm": "torque", "q_a_m3_s": "q_a", "q_b_m3_s": "q_b", "q_case_m3_s": "q_case"}
+_INPUT_SI = ("speed_rad_s", "p_a_Pa", "p_b_Pa", "p_case_Pa", "oil_temp_C", "viscosity_Pa_s")
+_DISPLACEMENT_UNITS = {"cm3": 1e-6, "cc": 1e-6, "ml": 1e-6, "cm3_rev": 1e-6, "cc_rev": 1e-6, "ml_rev": 1e-6,
+                       "m3": 1.0, "m3_rev": 1.0, "l": 1e-3, "l_rev": 1e-3, "in3": 1.6387064e-5,
+                       "in3_rev": 1.6387064e-5}
+_DP_HEADERS = {f"{b}_{u}": u for b in ("dp", "delta_p", "deltap", "p_ab") for u in _PRESSURE_UNITS}
+_ID_HEADERS = ("point_id", "pointid", "point", "id")
+_COUNT_HEADERS = ("n_samples", "samples", "n", "count")
+
+
+@dataclass
+class PointTable:
+    """Steady operating points, SI, every array over the points.
+
+    speed ω [rad/s]; p_a, p_b, p_case [Pa gauge]; temperature [°C] (NaN where
+    the viscosity column was used); viscosity μ [Pa·s]; displacement D
+    [m³/rev] (the spec's where the table gives none); measured : channel →
+    mean reading ("torque" [N·m], "q_a", "q_b", "q_case" [m³/s]), NaN where
+    absent; relative_sigma : channel → relative σ of each point's mean (from
+    ``*_std_*`` / √n_samples, or 1/√n_samples; 1 where the table gives
+    neither), normalized to a median of 1; point_id : names; file : source of
+    each point; line : its line in the file.
+    """
+
+    point_id: np.ndarray
+    speed: np.ndarray
+    p_a: np.ndarray
+    p_b: np.ndarray
+    p_case: np.ndarray
+    temperature: np.ndarray
+    viscosity: np.ndarray
+    displacement: np.ndarray
+    measured: dict
+    relative_sigma: dict
+    file: np.ndarray
+    line: np.ndarray
+    has_point_id: bool = False
+    weights_from: dict = field(default_factory=dict)  # channel → "std columns" / "n_samples" / "none"
+    variable_displacement: bool = False
+
+    def __len__(self) -> int:
+        return int(self.speed.size)
+
+    @property
+    def dp(self) -> np.ndarray:
+        return self.p_a - self.p_b
+
+    def subset(self, mask) -> "PointTable":
+        """The points where ``mask`` holds (a bool mask or an index array)."""
+        idx = np.arange(len(self))[mask]
+        take = lambda a: np.asarray(a)[idx]  # noqa: E731
+        return PointTable(take(self.point_id), take(self.speed), take(self.p_a), take(self.p_b),
+                          take(self.p_case), take(self.temperature), take(self.viscosity),
+                          take(self.displacement), {c: take(v) for c, v in self.measured.items()},
+                          {c: take(v) for c, v in self.relative_sigma.items()}, take(self.file),
+                          take(self.line), self.has_point_id, dict(self.weights_from), self.variable_displacement)
+
+    def channels(self) -> list:
+        """Output channels with at least one reading."""
+        return [c for c in ("torque", "q_a", "q_b", "q_case") if np.isfinite(self.measured[c]).any()]
+
+
+def _header_fields(path: Path):
+    fields, delim, body, header_line = _split_header(path, _read_text(path))
+    return fields, delim, body, header_line
+
+
+def _head_text(path: Path, size: int = 65536) -> str:
+    """The first ``size`` bytes of a (possibly gzipped) text file, decoded: enough for the header,
+    without reading a multi-gigabyte log twice."""
+    import gzip
+    import zlib
+
+    with open(path, "rb") as fh:
+        raw = fh.read(size)
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            with gzip.open(path, "rb") as fh:
+                raw = fh.read(size)
+        except (OSError, EOFError, zlib.error):
+            return ""
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return raw.decode("utf-16", errors="ignore")
+    return raw.decode("utf-8-sig", errors="ignore")
+
+
+def is_table(path) -> bool:
+    """True when ``path`` is an operating-point table: its header has no time column.
+
+    Only the file's head is read; a file whose head is not text is not a table (the log
+    reader then says what is wrong with it)."""
+    path = Path(path)
+    try:
+        text = _head_text(path)
+    except OSError:
+        return False
+    if not text or "\x00" in text:
+        return False
+    try:
+        fields = _split_header(path, text)[0]
+    except InputError:
+        return False
+    for name in fields:
+        norm = normalize_header(name)
+        if norm in _HEADERS and _HEADERS[norm][0].si == "time_s":
+            return False
+        if norm in ("run_id", "runid", "protocol"):  # a bench log that lost its time column: the log
+            return False                             # reader names what is missing
+    return True
+
+
+def _map_table_columns(path: Path, fields: list):
+    """Header → {key: (index, unit)} for the table's columns; keys are log SI columns plus
+    "dp_Pa", "displacement_m3", "n_samples", "point_id" and "std:<channel>"."""
+    found: dict = {}
+
+    def put(key, j, unit, name):
+        if key in found:
+            raise InputError(f"{path}: columns '{fields[found[key][0]]}' and '{name}' give the same quantity; keep one")
+        found[key] = (j, unit)
+
+    for j, name in enumerate(fields):
+        if name == "":
+            continue
+        norm = normalize_header(name)
+        if norm in _ID_HEADERS:
+            put("point_id", j, None, name)
+        elif norm in _COUNT_HEADERS:
+            put("n_samples", j, None, name)
+        elif norm in _DP_HEADERS:
+            put("dp_Pa", j, _DP_HEADERS[norm], name)
+        elif norm.startswith("displacement_") and norm[len("displacement_"):] in _DISPLACEMENT_UNITS:
+            put("displacement_m3", j, norm[len("displacement_"):], name)
+        elif "_std_" in norm and norm.replace("_std_", "_", 1) in _HEADERS:
+            q, unit = _HEADERS[norm.replace("_std_", "_", 1)]
+            if q.si in OUTPUTS:
+                put("std:" + OUTPUTS[q.si], j, unit, name)
+        elif norm in _HEADERS:
+            q, unit = _HEADERS[norm]
+            if q.si in OUTPUTS or q.si in _INPUT_SI:
+                put(q.si, j, unit, name)
+    if "speed_rad_s" not in found:
+        raise InputError(f"{path}: missing required column 'speed_rpm' (shaft speed, any unit suffix such as "
+                         f"_rpm, _rad_s)")
+    has_ports = "p_a_Pa" in found and "p_b_Pa" in found
+    if not has_ports and "dp_Pa" not in found:
+        missing = "p_b_bar" if "p_a_Pa" in found else "p_a_bar"
+        raise InputError(f"{path}: missing required column '{missing}' (port pressures 'p_a_bar' and 'p_b_bar', "
+                         f"or 'dp_bar' = P_A − P_B)")
+    if has_ports and "dp_Pa" in found:
+        raise InputError(f"{path}: both port pressures and '{fields[found['dp_Pa'][0]]}' given; keep one form")
+    if "dp_Pa" in found and ("p_a_Pa" in found or "p_b_Pa" in found):
+        other = fields[found["p_a_Pa" if "p_a_Pa" in found else "p_b_Pa"][0]]
+        raise InputError(f"{path}: '{fields[found['dp_Pa'][0]]}' and '{other}' given; use p_a_bar and p_b_bar, "
+                         f"or dp_bar alone")
+    return found
+
+
+def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
+    """Read and validate one operating-point table (CSV or CSV.gz) into SI arrays.
+
+    path : the table file; spec : :class:`motorid.spec.MotorSpec` (its oil gives μ
+    from ``oil_temp_C``, or from ``[oil] temp_C`` where the table has neither
+    column; its displacement where the table has no ``displacement_cm3``);
+    require_outputs : a fit needs at least one output column (``motorid predict``
+    does not).  Bad input raises :class:`~motorid.errors.InputError`, one line
+    naming the file and the column (and line).
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, not a table file")
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    fields, delim, body, header_line = _header_fields(path)
+    found = _map_table_columns(path, fields)
+    if require_outputs and not any(k in found for k in OUTPUTS):
+        raise InputError(f"{path}: no output column: a table for a fit needs at least one of torque_Nm, q_a_lpm, "
+                         f"q_b_lpm, q_case_lpm")
+    parse_keys = {k: v for k, v in found.items() if k != "point_id"}
+    if "point_id" in found:
+        parse_keys["run_id"] = found["point_id"]
+    table = _parse_body(path, body, delim, fields, parse_keys, header_line)
+    lines = header_line + 1 + np.arange(len(table))
+    numeric = [j for k, (j, _) in parse_keys.items() if k != "run_id"]
+    blank = np.all([table[j].isna().to_numpy() for j in numeric], axis=0)
+    table, lines = table.loc[~blank].reset_index(drop=True), lines[~blank]
+    n = len(table)
+    if n == 0:
+        raise InputError(f"{path}: no data rows after the header")
+
+    def column(key):
+        j, unit = found[key]
+        x = table[j].to_numpy(dtype=float)
+        return np.where(np.isinf(x), np.nan, x), j, unit
+
+    def required(key):
+        x, j, _ = column(key)
+        bad = np.flatnonzero(~np.isfinite(x))
+        if bad.size:
+            raise InputError(f"{path}: column '{fields[j]}', line {lines[bad[0]]}: empty cell (required)")
+        return x
+
+    def convert(key, x):
+        conv = _BY_SI[key].units[found[key][1]]
+        return conv(x) if callable(conv) else x * conv
+
+    speed = convert("speed_rad_s", required("speed_rad_s"))
+    if "dp_Pa" in found:
+        p_a = required("dp_Pa") * _PRESSURE_UNITS[found["dp_Pa"][1]]
+        p_b = np.zeros(n)
+    else:
+        p_a = convert("p_a_Pa", required("p_a_Pa"))
+        p_b = convert("p_b_Pa", required("p_b_Pa"))
+    p_case = convert("p_case_Pa", np.nan_to_num(column("p_case_Pa")[0])) if "p_case_Pa" in found else np.zeros(n)
+
+    temperature = np.full(n, np.nan)
+    if "oil_temp_C" in found:
+        temperature = convert("oil_temp_C", column("oil_temp_C")[0])
+        if np.any(temperature < -273.15):
+            i = int(np.flatnonzero(temperature < -273.15)[0])
+            raise InputError(f"{path}: column '{fields[found['oil_temp_C'][0]]}', line {lines[i]}: "
+                             f"temperature below absolute zero")
+    mu = np.full(n, np.nan)
+    oil = getattr(spec, "oil", None)
+    if "viscosity_Pa_s" in found:
+        x, j, unit = column("viscosity_Pa_s")
+        if np.any(x <= 0):
+            i = int(np.flatnonzero(x <= 0)[0])
+            raise InputError(f"{path}: column '{fields[j]}', line {lines[i]}: viscosity must be > 0")
+        conv = _BY_SI["viscosity_Pa_s"].units[unit]
+        if isinstance(conv, tuple):  # kinematic: needs the density of the spec's oil
+            if oil is None:
+                raise InputError(f"{path}: column '{fields[j]}' is a kinematic viscosity; a motor spec with an "
+                                 f"[oil] table is needed for the density")
+            from motorid.physics.oil import density
+
+            t = np.where(np.isfinite(temperature), temperature,
+                         oil.temp_C if oil.temp_C is not None else 40.0)
+            mu = x * conv[1] * np.asarray(density(t, oil.density15_kg_m3, oil.expansion_per_K), dtype=float)
+        else:
+            mu = x * conv
+    gaps = ~np.isfinite(mu)
+    if gaps.any():
+        t_fill = np.where(np.isfinite(temperature), temperature,
+                          np.nan if oil is None or oil.temp_C is None else oil.temp_C)
+        missing = gaps & ~np.isfinite(t_fill)
+        if missing.any():
+            i = int(np.flatnonzero(missing)[0])
+            raise InputError(f"{path}: line {lines[i]}: no viscosity_mPas nor oil_temp_C, and the motor spec "
+                             f"has no [oil] temp_C to take the oil temperature from")
+        if oil is None:
+            raise InputError(f"{path}: no viscosity column and no [oil] in the motor spec to derive it from the "
+                             f"oil temperature")
+        mu = np.where(gaps, _oil_viscosity(spec, np.where(gaps, t_fill, 40.0)), mu)
+        temperature = np.where(np.isfinite(temperature), temperature, t_fill)
+
+    if "displacement_m3" in found:
+        x, j, unit = column("displacement_m3")
+        x = np.where(np.isfinite(x), x * _DISPLACEMENT_UNITS[unit], np.nan)
+        if np.any(x <= 0):
+            i = int(np.flatnonzero(x <= 0)[0])
+            raise InputError(f"{path}: column '{fields[j]}', line {lines[i]}: displacement must be > 0")
+        if spec is None and np.isnan(x).any():
+            raise InputError(f"{path}: column '{fields[j]}' has empty cells and no motor spec gives a displacement")
+        displacement = np.where(np.isfinite(x), x, np.nan if spec is None else spec.displacement)
+        variable = True
+    else:
+        if spec is None:
+            raise InputError(f"{path}: no displacement_cm3 column and no motor spec")
+        displacement = np.full(n, float(spec.displacement))
+        variable = False
+
+    measured, rel, how = {}, {}, {}
+    counts = None
+    if "n_samples" in found:
+        counts, j, _ = column("n_samples")
+        if np.any(counts[np.isfinite(counts)] < 1):
+            i = int(np.flatnonzero(np.isfinite(counts) & (counts < 1))[0])
+            raise InputError(f"{path}: column '{fields[j]}', line {lines[i]}: n_samples must be ≥ 1")
+    for si, c in OUTPUTS.items():
+        measured[c] = convert(si, column(si)[0]) if si in found else np.full(n, np.nan)
+        s = np.ones(n)
+        how[c] = "none"
+        if "std:" + c in found:
+            x, j, unit = column("std:" + c)
+            conv = _BY_SI[si].units[unit]
+            x = x * conv
+            if np.any(x[np.isfinite(x)] <= 0):
+                i = int(np.flatnonzero(np.isfinite(x) & (x <= 0))[0])
+                raise InputError(f"{path}: column '{fields[j]}', line {lines[i]}: a spread must be > 0")
+            if np.isfinite(x).any():
+                s = np.where(np.isfinite(x), x, np.nanmedian(x))
+                how[c] = "std columns"
+        if counts is not None:
+            s = s / np.sqrt(np.where(np.isfinite(counts), counts, np.nanmedian(counts)))
+            how[c] = how[c] + " and n_samples" if how[c] != "none" else "n_samples"
+        rel[c] = s / np.median(s)
+    if "point_id" in found:
+        ids = table[found["point_id"][0]].fillna("").astype(str).str.strip().to_numpy(dtype=object)
+        empty = np.flatnonzero(ids == "")
+        if empty.size:
+            raise InputError(f"{path}: column '{fields[found['point_id'][0]]}', line {lines[empty[0]]}: empty cell")
+        has_id = True
+    else:
+        ids = np.array([f"{path.name}:{k}" for k in lines], dtype=object)
+        has_id = False
+    return PointTable(ids, speed, p_a, p_b, p_case, temperature, mu, displacement, measured, rel,
+                      np.array([str(path)] * n, dtype=object), lines, has_id, how, variable)
+
+
+def concat_tables(tables: list) -> PointTable:
+    """Several tables as one (each point keeps its file and line)."""
+    if len(tables) == 1:
+        return tables[0]
+    cat = lambda name: np.concatenate([getattr(t, name) for t in tables])  # noqa: E731
+    chans = ("torque", "q_a", "q_b", "q_case")
+    how = {c: "/".join(sorted({t.weights_from.get(c, "none") for t in tables})) for c in chans}
+    # relative σ of different tables are not on one scale: each was normalized to its own median
+    return PointTable(cat("point_id"), cat("speed"), cat("p_a"), cat("p_b"), cat("p_case"), cat("temperature"),
+                      cat("viscosity"), cat("displacement"),
+                      {c: np.concatenate([t.measured[c] for t in tables]) for c in chans},
+                      {c: np.concatenate([t.relative_sigma[c] for t in tables]) for c in chans},
+                      cat("file"), cat("line"), all(t.has_point_id for t in tables), how,
+                      any(t.variable_displacement for t in tables))
+
+
+def read_tables(paths, spec=None, require_outputs: bool = True) -> PointTable:
+    """Read one or several tables (see :func:`read_table`) as one."""
+    return concat_tables([read_table(p, spec, require_outputs) for p in paths])
+
+
+def split_logs_and_tables(paths) -> tuple[list, list]:
+    """Files given on the command line → (bench logs, operating-point tables); folders are
+    expanded to their ``*.csv`` / ``*.csv.gz`` files.  A file is a table when its header
+    has no time column."""
+    files = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.is_file() and
+                           (q.name.endswith(".csv") or q.name.endswith(".csv.gz")))
+            if not found:
+                raise InputError(f"{p}: directory holds no .csv or .csv.gz file")
+            files += found
+        elif not p.exists():
+            raise InputError(f"{p}: no such file")
+        else:
+            files.append(p)
+    logs, tables = [], []
+    for f in files:
+        (tables if is_table(f) else logs).append(f)
+    return logs, tables

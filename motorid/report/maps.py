@@ -1,0 +1,206 @@
+"""Efficiency maps and the loss-model comparison for fits with operating-point tables.
+
+Contour plots over (ΔP, speed), all quadrants on one plane (signed ΔP across,
+signed speed up; motor mode where ΔP·ω > 0, pump mode where < 0) of the
+volumetric, hydromechanical and overall efficiency (:mod:`motorid.physics.efficiency`):
+measured, predicted by the fitted model at the same points, and the residual
+(measured − predicted).  Triangles that straddle two quadrants are left blank:
+the efficiencies are undefined where no power flows.  The comparison table
+gives the held-out errors of motorid and of the classical loss models
+(:mod:`motorid.comparators.evaluate`).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import html
+from pathlib import Path
+
+import numpy as np
+
+BAR, RPM = 1e5, 2 * np.pi / 60
+ROWS = (("volumetric", "η_v"), ("hydromechanical", "η_hm"), ("overall", "η"))
+
+
+def _esc(x) -> str:
+    return html.escape(str(x))
+
+
+def efficiency_arrays(table, channels: dict) -> dict:
+    """name → efficiency at each point, from channels (SI) at the table's operating points."""
+    from motorid.physics.efficiency import efficiencies
+
+    ev, ehm, e = efficiencies(np.asarray(channels["torque"], float), np.asarray(channels["q_a"], float),
+                              np.asarray(channels["q_b"], float), table.speed, table.p_a, table.p_b,
+                              table.displacement)
+    return {"volumetric": np.asarray(ev), "hydromechanical": np.asarray(ehm), "overall": np.asarray(e)}
+
+
+def plot_efficiency_maps(table, predicted: dict):
+    """The 3 × 3 grid of contour maps (rows: η_v, η_hm, η; columns: measured, predicted,
+    residual) as a :class:`motorid.report.plots.Plot`, or None where no efficiency is defined."""
+    import matplotlib.tri as mtri
+
+    from motorid.report.plots import Plot, _figure, embed_png
+
+    meas = efficiency_arrays(table, table.measured)
+    pred = efficiency_arrays(table, predicted)
+    x, y = table.dp / BAR, table.speed / RPM
+    rows = [(k, s) for k, s in ROWS if np.isfinite(meas[k]).sum() >= 4]
+    if not rows:
+        return None
+    quadrant = np.sign(x) * 2 + np.sign(y)
+    fig, axes = _figure(len(rows), 3, figsize=(11.5, 3.2 * len(rows)), squeeze=False)
+    facts = {}
+    for r, (k, sym) in enumerate(rows):
+        ok = np.isfinite(meas[k]) & np.isfinite(pred[k])
+        if ok.sum() < 4:
+            continue
+        tri = mtri.Triangulation(x[ok], y[ok])
+        q = quadrant[ok][tri.triangles]
+        tri.set_mask(~np.all(q == q[:, :1], axis=1))
+        lo = float(np.nanpercentile(np.r_[meas[k][ok], pred[k][ok]], 2))
+        hi = float(np.nanpercentile(np.r_[meas[k][ok], pred[k][ok]], 98))
+        levels = np.linspace(lo, hi, 12) if hi > lo else None
+        res = meas[k][ok] - pred[k][ok]
+        lim = float(np.nanmax(np.abs(res))) or 1e-12
+        for c, (vals, title, cmap, lev) in enumerate((
+                (meas[k][ok], f"{sym} measured", "viridis", levels),
+                (pred[k][ok], f"{sym} predicted", "viridis", levels),
+                (res, f"{sym} measured − predicted", "RdBu_r", np.linspace(-lim, lim, 13)))):
+            ax = axes[r, c]
+            try:
+                cs = ax.tricontourf(tri, vals, levels=lev, cmap=cmap, extend="both")
+                fig.colorbar(cs, ax=ax, shrink=0.85)
+            except ValueError:  # all triangles masked (points on a line)
+                ax.scatter(x[ok], y[ok], c=vals, cmap=cmap, s=12)
+            ax.plot(x[ok], y[ok], ".", color="k", ms=2)
+            ax.axhline(0, color="k", lw=0.6)
+            ax.axvline(0, color="k", lw=0.6)
+            ax.set_title(title)
+            ax.set_xlabel("ΔP = P_A − P_B [bar]")
+            ax.set_ylabel("speed [rpm]")
+        facts[k] = {"rms_residual": float(np.sqrt(np.mean(res**2))), "points": int(ok.sum())}
+    return Plot(embed_png(fig, "efficiency maps: measured, predicted, residual"), facts)
+
+
+def comparison_section(doc: dict) -> str:
+    """The comparison table (held-out errors of motorid and of the classical models) as HTML;
+    "" where the document has no ``comparison`` block."""
+    comp = doc.get("comparison")
+    if not comp:
+        return ""
+    chans = [c for c in ("torque", "q_a", "q_b", "q_case")
+             if any(c in m.get("kfold", {}) for m in comp["models"].values())]
+    kinds = (("kfold", "K-fold"), ("extrapolate_pressure", "extrap. ΔP"), ("extrapolate_speed", "extrap. speed"))
+    head = "<tr><th rowspan=2>model</th>" + "".join(f"<th colspan=3>{_esc(c)}</th>" for c in chans) + "</tr>"
+    head += "<tr>" + "".join(f"<th>{k[1]}</th>" for _ in chans for k in kinds) + "</tr>"
+    best = {}
+    for c in chans:
+        for kind, _ in kinds:
+            vals = [m.get(kind, {}).get(c, {}).get("percent_of_span") for m in comp["models"].values()]
+            vals = [v for v in vals if v is not None]
+            best[(c, kind)] = min(vals) if vals else None
+    body = []
+    for name, m in comp["models"].items():
+        cells = []
+        for c in chans:
+            for kind, _ in kinds:
+                v = m.get(kind, {}).get(c, {}).get("percent_of_span")
+                mark = " style=\"font-weight:bold\"" if v is not None and v == best[(c, kind)] else ""
+                cells.append(f'<td class="num"{mark}>' + ("—" if v is None else f"{v:.3g}") + "</td>")
+        ref = _esc(m.get("equations") or m.get("reference", ""))
+        body.append(f'<tr><td title="{ref}">{_esc(name)}</td>' + "".join(cells) + "</tr>")
+    method = comp.get("method", {})
+    refs = "".join(f"<li><b>{_esc(n)}</b>: {_esc(m.get('equations', ''))} — {_esc(m.get('reference', ''))}</li>"
+                   for n, m in comp["models"].items())
+    return ("<section id=\"comparison\"><h2>Held-out prediction: motorid and the classical loss models</h2>"
+            f"<p>RMS of the held-out residual, in % of each channel's measured span (bold: the best). "
+            f"{_esc(method.get('kfold', ''))}; extrapolation: {_esc(method.get('extrapolation', ''))}.</p>"
+            f'<div class="wide"><table id="comparison-table">{head}{"".join(body)}</table></div>'
+            f"<details><summary>the models</summary><ul>{refs}</ul></details></section>")
+
+
+def _parameter_rows(doc: dict) -> str:
+    rows = []
+    for k, e in doc["parameters"].items():
+        if e.get("identifiable"):
+            rows.append(f"<tr><td>{_esc(k)}</td><td class=\"num\">{e['value']:.5g}</td>"
+                        f"<td class=\"num\">{e['std']:.3g}</td><td>{_esc(e['unit'])}</td><td class=\"yes\">yes</td></tr>")
+        else:
+            rows.append(f"<tr class=\"no\"><td>{_esc(k)}</td><td>—</td><td>—</td><td>{_esc(e['unit'])}</td>"
+                        f"<td class=\"no\">no: {_esc(e.get('reason', ''))}</td></tr>")
+    return ("<table id=\"parameter-table\"><tr><th>parameter</th><th>value</th><th>std</th><th>unit</th>"
+            "<th>identifiable</th></tr>" + "".join(rows) + "</table>")
+
+
+def render_map_report(doc: dict, tf) -> str:
+    """The report page of a fit with operating-point tables."""
+    from motorid.report.html import CSS
+
+    plot = plot_efficiency_maps(tf.table, tf.table_prediction)
+    motor = doc.get("motor", {})
+    t = doc.get("table", {})
+    if plot is not None:
+        facts = "; ".join(f"{k}: RMS residual {v['rms_residual']:.4f} over {v['points']} points"
+                          for k, v in plot.facts.items())
+        maps = (f"<figure>{plot.img}<figcaption>Efficiencies over (ΔP, speed), all quadrants (motor mode where "
+                f"ΔP·ω &gt; 0, pump mode where &lt; 0; definitions in docs/maps.md): measured, predicted by the "
+                f"fitted model at the same points, and measured − predicted. {_esc(facts)}.</figcaption></figure>")
+    else:
+        maps = '<p class="missing">No efficiency can be formed: the table lacks torque or the port flows.</p>'
+    parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+             f"<title>motorid map report: {_esc(motor.get('name', 'motor'))}</title>", f"<style>{CSS}</style>",
+             "</head><body>", f"<h1>motorid map report: {_esc(motor.get('name', 'motor'))}</h1>",
+             f'<p class="meta">{t.get("points", "?")} operating points from {_esc(", ".join(t.get("files", [])))}; '
+             f'written {_dt.datetime.now().strftime("%Y-%m-%d %H:%M")}.</p>',
+             "<section id=\"parameters\"><h2>Parameters</h2>", _parameter_rows(doc), "</section>",
+             "<section id=\"efficiency-maps\"><h2>Efficiency maps</h2>", maps, "</section>",
+             comparison_section(doc), "</body></html>"]
+    return "\n".join(parts) + "\n"
+
+
+def write_map_report(out_dir, doc: dict, tf, spec=None) -> Path:
+    """Write ``out_dir/report.html`` for a fit with tables (whole or not at all)."""
+    from motorid._atomic import write_bytes_atomic
+
+    path = Path(out_dir) / "report.html"
+    write_bytes_atomic(path, render_map_report(doc, tf).encode("utf-8"))
+    return path
+
+
+def is_table_result(out_dir) -> bool:
+    """True when ``out_dir/result.json`` is a fit with operating-point tables."""
+    import json
+
+    f = Path(out_dir) / "result.json"
+    try:
+        return "table" in json.loads(f.read_text())
+    except (OSError, ValueError):
+        return False
+
+
+def rerender_map_report(out_dir, motor=None) -> Path:
+    """report.html of a table fit from its result.json: the tables it names are re-read and
+    the model evaluated at the fitted parameters (nothing refitted)."""
+    from types import SimpleNamespace
+
+    from motorid.errors import InputError
+    from motorid.identify.predict import _parameters, load_result
+    from motorid.identify.tables import point_channels, table_samples
+    from motorid.io.tables import read_tables
+    from motorid.spec import load_motor_spec
+
+    doc, spec, mechanisms = load_result(out_dir, load_motor_spec(motor) if motor else None)
+    paths = doc.get("inputs", {}).get("tables") or []
+    missing = [p for p in paths if not Path(p).exists()]
+    if not paths or missing:
+        raise InputError(f"{Path(out_dir) / 'result.json'}: the table {missing[0] if missing else '(none named)'} "
+                         f"it was fitted on is not found")
+    table = read_tables(paths, spec)
+    params = _parameters(doc, spec, mechanisms)[0]
+    ch = point_channels(params, spec, table_samples(spec, table),
+                        table.displacement if table.variable_displacement else None, mechanisms)
+    tf = SimpleNamespace(table=table, table_prediction=dict(zip(("torque", "q_a", "q_b", "q_case"),
+                                                                (np.asarray(c) for c in ch))))
+    return write_map_report(out_dir, doc, tf, spec)

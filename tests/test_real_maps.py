@@ -1,0 +1,42 @@
+"""Every operating-point table shipped under real_data/: fit, and held-out error against the classical models."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _real_tables():
+    out = []
+    for folder in sorted((REPO / "real_data").glob("*")) if (REPO / "real_data").is_dir() else []:
+        if (folder / "motor.toml").exists():
+            out += [(folder, f) for f in sorted(folder.glob("*.csv"))]
+    return out
+
+
+@pytest.mark.parametrize("folder,path", _real_tables() or [pytest.param(None, None, marks=pytest.mark.skip(
+    reason="no operating-point table under real_data/"))])
+def test_real_map_fits_and_predicts_held_out_points_like_the_classical_models(folder, path):
+    from motorid.comparators.evaluate import compare
+    from motorid.identify.tables import fit_table
+    from motorid.io.tables import is_table, read_table
+    from motorid.spec import load_motor_spec
+
+    if not is_table(path):
+        pytest.skip(f"{path.name} is a log, not a table")
+    spec = load_motor_spec(folder / "motor.toml")
+    table = read_table(path, spec)
+    tf = fit_table(table, spec)
+    for k in ("KFS", "Ks"):
+        assert not tf.ls.identifiable[k]
+    comp = compare(table, spec)["models"]
+    classical = {k: v for k, v in comp.items() if k != "motorid"}
+    for c in table.channels():
+        ours = comp["motorid"]["kfold"][c]["rms"]
+        best = min(v["kfold"][c]["rms"] for v in classical.values() if v["kfold"][c]["rms"] is not None)
+        # within half again of the best classical law on held-out points (benchmarks/results.md has the numbers)
+        assert np.isfinite(ours) and ours <= 1.5 * best, (c, ours, best)
