@@ -118,7 +118,7 @@ def map_section(seed: int = 7) -> list[str]:
         dg = diagnose_table(table, spec, max_mechanisms=2)
         found = [m.id for m in dg["mechanisms"]]
         ls = dg["fit"].ls
-        words = "; ".join(f"{k.split('.', 1)[1]} {ls.values.get(f'{mid}.{k}', float('nan')):.3g} ± "
+        words = "; ".join(f"{k} {ls.values.get(f'{mid}.{k}', float('nan')):.3g} ± "
                           f"{ls.std.get(f'{mid}.{k}') or float('nan'):.2g} (truth {v:.3g})"
                           for k, v in MAP_SIZES.get(mid, {}).items()) if mid in found else "—"
         lines.append(f"| {f'`{mid}`' if mid else 'nothing (clean map)'} | {', '.join(found) or 'none'} | {words} |")

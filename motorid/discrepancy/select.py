@@ -116,12 +116,16 @@ def _best_of_starts(dataset, spec, mechanisms, noise, inliers, current, mech) ->
 
 
 def _tied(scored: list, min_evidence: float) -> bool:
-    """Whether the two best candidates both earn their place and neither beats the other
-    by ``min_evidence`` (ΔBIC): mechanisms whose signatures coincide on these data (e.g. a
-    Stribeck curve in speed and one in μω/ΔP where all slow runs share one pressure).  A
-    wrong name is worse than none, so diagnose then names neither."""
-    return (len(scored) > 1 and scored[1].delta_bic > min_evidence
-            and scored[0].delta_bic - scored[1].delta_bic < min_evidence)
+    """Whether the two best candidates both earn their place (ΔBIC > ``min_evidence``) and
+    the data do not tell them apart: the first beats the second by less than ``min_evidence``
+    in ΔBIC or in Δχ² (the fit itself — where both fit alike, one parameter fewer must not
+    decide the name).  Mechanisms whose signatures coincide on these data (a Stribeck curve
+    in speed and one in μω/ΔP where all slow runs share one pressure) tie; a wrong name is
+    worse than none, so diagnose then names neither."""
+    if len(scored) < 2 or scored[1].delta_bic <= min_evidence:
+        return False
+    a, b = scored[0], scored[1]
+    return min(a.delta_bic - b.delta_bic, a.delta_chi2 - b.delta_chi2) < min_evidence
 
 
 def _structure_key(s) -> tuple:
