@@ -18,6 +18,8 @@ Schema (keys marked * are required; the procedure decides which apply)::
     [set_points]                             # swept as a grid, one run per point
     oil_temp_C = [40.0]                      # set oil temperatures [°C]
     directions = ["positive", "negative"]    # or [1, -1]
+    power_flow = ["motor", "pump"]           # constant_speed, constant_pressure: pump mode turns the
+                                             #   shaft against ΔP (dynamometer drives); default ["motor"]
     speed_rpm = [...]                        # constant_speed, constant_pressure (> 0)
     pressure_difference_bar = [...]          # constant_speed, constant_pressure (> 0)
     shaft_angle_deg = [...]                  # startability
@@ -181,11 +183,14 @@ class RunPlan:
     shaft_angle: float | None = None
     load_torque: float | None = None
     flow: float | None = None
+    pump: bool = False  # pump mode: the high pressure on the port the shaft's rotation delivers to
 
     def describe(self) -> dict:
         """The set point in the log's units, for a manifest."""
         d = {"direction": "positive" if self.direction > 0 else "negative",
              "oil_temp_C": self.oil_temp, "sample_rate_Hz": self.sample_rate}
+        if self.pump:
+            d["power_flow"] = "pump"
         for name, (key, factor) in {"speed": ("speed_rpm", RAD_S_PER_RPM),
                                     "pressure_difference": ("pressure_difference_bar", PA_PER_BAR),
                                     "shaft_angle": ("shaft_angle_deg", math.pi / 180.0),
@@ -255,6 +260,20 @@ def _directions(table: dict, where: str) -> list[int]:
             raise InputError(f"{where}: key 'directions' takes \"positive\", \"negative\", 1 or -1, got {v!r}")
     if not out:
         raise InputError(f"{where}: key 'directions' must not be an empty list")
+    return out
+
+
+def _power_flow(table: dict, where: str) -> list[bool]:
+    """[set_points] power_flow: "motor" and/or "pump" → [is pump mode] (default motor only)."""
+    value = table.get("power_flow", ["motor"])
+    values = value if isinstance(value, list) else [value]
+    out = []
+    for v in values:
+        if not isinstance(v, str) or v.lower() not in ("motor", "pump"):
+            raise InputError(f"{where}: key 'power_flow' takes \"motor\" or \"pump\", got {v!r}")
+        out.append(v.lower() == "pump")
+    if not out:
+        raise InputError(f"{where}: key 'power_flow' must not be an empty list")
     return out
 
 
@@ -368,7 +387,9 @@ def parse_protocol(data: dict, source: str = "protocol", name: str | None = None
     sp = _table(data, "set_points", source)
     sw = f"{source} [set_points]"
     swept = SWEEPS[procedure]
-    _check_keys(sp, ("oil_temp_C", "directions", *swept), sw, f" for procedure {procedure}")
+    modal = ("power_flow",) if procedure in _RATE_ALIGNED and "speed_rpm" in swept else ()
+    _check_keys(sp, ("oil_temp_C", "directions", *modal, *swept), sw, f" for procedure {procedure}")
+    modes = _power_flow(sp, sw) if modal else [False]
     set_points = {"oil_temp_C": _number_list(sp, "oil_temp_C", sw, required=False, default=[40.0],
                                              low=-40.0, low_open=False, high=150.0)}
     for key in swept:
@@ -383,15 +404,15 @@ def parse_protocol(data: dict, source: str = "protocol", name: str | None = None
 
     runs = []
     aligned = _RATE_ALIGNED.get(procedure)
-    for temp, direction, *point in itertools.product(set_points["oil_temp_C"], directions,
-                                                     *(range(len(set_points[k])) for k in swept)):
+    for temp, direction, pump, *point in itertools.product(set_points["oil_temp_C"], directions, modes,
+                                                           *(range(len(set_points[k])) for k in swept)):
         values = {k: set_points[k][i] * _SET_POINT_LIMITS[k][3] for k, i in zip(swept, point)}
         rate = rates[point[swept.index(aligned)]] if aligned else rates[0]
         runs.append(RunPlan(
             index=len(runs), direction=direction, oil_temp=float(temp), sample_rate=float(rate),
             speed=values.get("speed_rpm"), pressure_difference=values.get("pressure_difference_bar"),
             shaft_angle=values.get("shaft_angle_deg"), load_torque=values.get("load_torque_Nm"),
-            flow=values.get("flow_lpm")))
+            flow=values.get("flow_lpm"), pump=pump))
     total = sum(_expected_samples(procedure, r, timing) for r in runs)
     if total > MAX_SAMPLES:
         raise InputError(f"{tw}: the plan asks for about {total:.3g} samples (more than {MAX_SAMPLES:.0e}); "

@@ -154,7 +154,7 @@ def _speed_held(protocol: Protocol, spec: MotorSpec, truth: Truth, rngs, warn) -
                                          * np.sin(2.0 * math.pi * sup.pressure_ripple_freq * t + ph[2]))
         p_in = cond.back_pressure + dp
         temp = plan.oil_temp + temp_offset + cond.temp_drift * t
-        a_in = plan.direction > 0
+        a_in = (plan.direction > 0) != plan.pump  # pump mode: the high pressure where the shaft delivers
         pieces.append({
             "time_s": t, "theta_rad": theta0 + w_set * (t + r_int), "speed_rad_s": w_set * (1.0 + r),
             "acceleration_rad_s2": w_set * r_der,

@@ -122,6 +122,19 @@ def _best_of_starts(dataset, spec, mechanisms, noise, inliers, current, mech) ->
                              initial=best.params_all)
 
 
+def _tied(scored: list, min_evidence: float) -> bool:
+    """Whether the two best candidates both earn their place (ΔBIC > ``min_evidence``) and
+    the data do not tell them apart: the first beats the second by less than ``min_evidence``
+    in ΔBIC or in Δχ² (the fit itself — where both fit alike, one parameter fewer must not
+    decide the name).  Mechanisms whose signatures coincide on these data (a Stribeck curve
+    in speed and one in μω/ΔP where all slow runs share one pressure) tie; a wrong name is
+    worse than none, so diagnose then names neither."""
+    if len(scored) < 2 or scored[1].delta_bic <= min_evidence:
+        return False
+    a, b = scored[0], scored[1]
+    return min(a.delta_bic - b.delta_bic, a.delta_chi2 - b.delta_chi2) < min_evidence
+
+
 def _structure_key(s) -> tuple:
     return (s.channel, s.variable, s.order)
 
@@ -152,6 +165,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
             # in the port flows, as K_L0 follows the case meter); default: the channels it acts on
             if mech in current_mechs or not channels & set(getattr(mech, "shows_in", mech.channels)):
                 continue
+            if not getattr(mech, "seen_by", lambda ds: True)(dataset):  # e.g. pump-mode law, no pump runs
+                continue
             fit = _best_of_starts(dataset, spec, current_mechs + [mech], noise, inliers, current.params_all, mech)
             d = current.chi2 - fit.chi2
             k = sum(1 for p in mech.parameters if fit.identifiable.get(p))
@@ -159,6 +174,11 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         if not scored:
             break
         scored.sort(key=lambda c: -c.delta_bic)
+        if _tied(scored, min_evidence):  # two names explain it alike: naming one would be a guess
+            steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
+                           "cv_gain": None, "accepted": False, "tied": i < 2} for i, c in enumerate(scored)])
+            say(f"{scored[0].mechanism.id} and {scored[1].mechanism.id} explain it alike; neither is named")
+            break
         if current_cv is None and folds > 1:
             current_cv = _held_out_chi2(dataset, spec, current_mechs, noise, inliers, current.params_all, fold_runs)
         for cand in scored[:cv_top]:

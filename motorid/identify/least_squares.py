@@ -190,7 +190,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     data : an :class:`motorid.identify.types.Dataset` (running samples and their
         measured channels, breakaway events and their held torques)
     spec : :class:`motorid.model.MotorSpec`
-    mechanisms : extra physics (discrepancy catalog) whose parameters are fitted too
+    mechanisms : extra physics (physics registry) whose parameters are fitted too
     initial : starting values (defaults: typical sizes, then a Gauss-Newton start)
     """
     opt = options or FitOptions()

@@ -287,7 +287,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     """Fit the model (plus ``mechanisms``) to operating-point tables, alone or with logs.
 
     table : :class:`motorid.io.tables.PointTable` (None: logs only is not this function's job)
-    spec : :class:`motorid.spec.MotorSpec`; mechanisms : extra physics whose parameters are fitted too
+    spec : :class:`motorid.model.MotorSpec`; mechanisms : extra physics whose parameters are fitted too
     dataset, log_fit : the logs' extracted :class:`~motorid.identify.extract.Dataset` and their own
         least-squares fit (its per-sample noise and inliers weight the logs in the joint fit)
     train : bool mask over the table points to fit on (the rest get weight 0: K-fold refits)

@@ -23,10 +23,13 @@ from motorid.physics.compressibility import CompressibilityFlow
 from motorid.physics.friction import CasePressureFriction, StribeckFriction
 from motorid.physics.hydrodynamic import HydrodynamicTorque
 from motorid.physics.leakage import TurbulentLeakage
+from motorid.physics.lubrication import MixedLubricationFriction, PressureSpeedTorque
+from motorid.physics.mode import PumpModeFriction
 from motorid.physics.ripple import MisalignmentRipple
 from motorid.physics import sensors, spec_errors
 from motorid.physics.sensors import TorqueOffset
 from motorid.physics.viscosity import PressureViscosity
+from motorid.physics.volumetric import FillingLoss
 
 _ALL = (
     StribeckFriction(),
@@ -37,6 +40,10 @@ _ALL = (
     TorqueOffset(),
     CasePressureFriction(),
     PressureViscosity(),
+    MixedLubricationFriction(),  # physics that measured loss maps show (issue 20)
+    PressureSpeedTorque(),
+    FillingLoss(),
+    PumpModeFriction(),
     *spec_errors.MECHANISMS,  # displacement_error, leak_phase
     *sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, sensor_lag_<channel>
 )

@@ -1,6 +1,6 @@
 """Transducer errors: what the bench reads is not what the motor does.
 
-Mechanisms of the discrepancy catalog (issue 15) that model the *reading*, as
+Mechanisms of the physics registry (issue 15) that model the *reading*, as
 an extension of the one model (their hooks change the channel a transducer
 reports, never the motor's physics):
 

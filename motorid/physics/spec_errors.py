@@ -1,6 +1,6 @@
 """Spec errors: the motor data the model is given are not the motor's.
 
-Two mechanisms of the discrepancy catalog (issue 15), each an extension of the
+Two mechanisms of the physics registry (issue 15), each an extension of the
 one model through its hooks (:mod:`motorid.physics.base`):
 
 - ``displacement_error``: the true displacement is D' = D·(1 + ε), D the spec's.

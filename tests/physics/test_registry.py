@@ -37,6 +37,8 @@ VALUES = {
     "torque_meter_gain.g": -0.008,
     "sensor_lag_torque.tau": 2e-3, "sensor_lag_q_a.tau": 5e-3, "sensor_lag_q_b.tau": 4e-3,
     "sensor_lag_q_case.tau": 3e-3,
+    "mixed_lubrication.C_m": 0.015, "mixed_lubrication.S_m": 2e-9,  # motorid/physics (issue 20)
+    "pressure_speed_loss.C_x": 4e-10, "filling_loss.C_f": 3e-10, "pump_mode_friction.dKF": -1.2e-3,
 }
 REQUIRED = ["stribeck_friction", "hydrodynamic_torque", "turbulent_leakage", "compressibility_flow",
             "misalignment_ripple", "torque_offset"]
