@@ -83,6 +83,8 @@ def normal_equations(values: dict, ctx: Ctx):
     jac = jax.jacfwd(weighted_residual)(values, ctx)
     J = jnp.stack([jac[k] for k in ctx.free], axis=1)
     return J.T @ J, J.T @ r, r @ r
+
+
 predictions_jit = cached_jit(predictions)
 
 
