@@ -274,6 +274,62 @@ def replicate(seed, spec, truth, prots, keep_dataset=False, diagnose=False):
     return out
 
 
+def efficiency_task(job: dict) -> dict:
+    """One efficiency replication (a task for motorid.fleet.map_tasks): ``replicate`` at
+    ``job["seed"]``, returned without its fit object (small and picklable)."""
+    spec, truth, prots = _setup()
+    r = replicate(job["seed"], spec, truth, prots, diagnose=job["diagnose"])
+    r.pop("ls", None)
+    return r
+
+
+def sbc_task(job: dict) -> dict:
+    """One SBC replication (a task for motorid.fleet.map_tasks): simulate at the prior draw
+    ``job["draw"]``, fit, sample the posterior; returns the ranks of the draw among SBC_DRAWS
+    thinned posterior samples and the few numbers the study tabulates (no fit objects)."""
+    from motorid.bench.truth import Truth
+    from motorid.identify.bayes import sample_posterior
+
+    spec, _, prots = _setup()
+    draw, prior = job["draw"], job["prior"]
+    r = replicate(job["seed"], spec, Truth(params=draw, mechanisms=(), source="sbc draw"), prots)
+    ls = r["ls"]
+    ts = time.time()
+    post = sample_posterior(ls, spec, seed=job["post_seed"], progress=False, max_seconds=60,
+                            prior={k: prior[k] for k in ls.free})
+    sec = time.time() - ts
+    s = post.samples()
+    pick = s[np.linspace(0, len(s) - 1, SBC_DRAWS).astype(int)]
+    return {"brk": r["brk"], "pairs": r["pairs"], "brk_design": r["brk_design"],
+            "sigma_brk": ls.noise.get("breakaway"), "free": list(ls.free),
+            "z": [(ls.values[k] - draw[k]) / ls.std[k] for k in ("KFS", "Ks")],
+            "sec_post": sec, "breakaway_noise": post.breakaway_noise, "converged": bool(post.converged),
+            "ranks": {k: int(np.sum(pick[:, post.names.index(k)] < draw[k])) for k in ls.free}}
+
+
+SCHEDULER_ENV = "MOTORID_BENCH_SCHEDULER"
+
+
+def _bench_client():
+    """A Dask client for the replications, kept open for a whole study: of the cluster at
+    ``$MOTORID_BENCH_SCHEDULER`` when set, else of an embedded LocalCluster (one process per core)."""
+    from motorid.fleet.tasks import dask_client
+
+    return dask_client(os.environ.get(SCHEDULER_ENV) or None)
+
+
+def _map(client, func, jobs: list, desc: str) -> list:
+    """``[func(j) for j in jobs]`` as tasks on ``client``; a failed task stops the study with
+    its one-line error."""
+    from motorid.fleet import map_tasks
+
+    out = map_tasks(func, jobs, client=client, desc=desc)
+    for job, r in zip(jobs, out):
+        if not isinstance(r, dict):
+            raise RuntimeError(f"{desc}: task with seed {job['seed']} failed: {r}")
+    return out
+
+
 def _fmt(x, digits=4):
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "—"
@@ -289,16 +345,18 @@ def efficiency(quick: bool, budget_s: float):
     n_rep = 10 if quick else N_REP
     n_diag = 5 if quick else N_DIAG
     t0 = time.time()
-    reps = []
-    first = None
-    for i in range(n_rep):
-        r = replicate(1000 + i, spec, truth, prots, keep_dataset=(i == 0), diagnose=(i < n_diag))
-        if i == 0:
-            first = dict(r)
-        r.pop("ls", None)
-        reps.append(r)
-        if time.time() - t0 > budget_s and i >= 9:
-            break
+    # replication 0 runs here (its fit, campaign and dataset feed the tables below); the rest run
+    # as tasks on Dask (motorid.fleet.map_tasks), in batches so that the time budget keeps its
+    # meaning: stop once the budget is spent and at least 10 replications are done
+    first = replicate(1000, spec, truth, prots, keep_dataset=True, diagnose=(0 < n_diag))
+    reps = [{k: v for k, v in first.items() if k != "ls"}]
+    with _bench_client() as client:
+        batch = max(1, sum(client.nthreads().values()))
+        i = 1
+        while i < n_rep and (time.time() - t0 <= budget_s or len(reps) < 10):
+            jobs = [{"seed": 1000 + j, "diagnose": j < n_diag} for j in range(i, min(n_rep, i + batch))]
+            reps += _map(client, efficiency_task, jobs, "efficiency replications")
+            i += len(jobs)
     t_rep = (time.time() - t0) / len(reps)
     n = len(reps)
     names = list(first["ls"].free)
@@ -411,9 +469,6 @@ def efficiency(quick: bool, budget_s: float):
 def sbc(quick: bool, budget_s: float):
     from scipy import stats
 
-    from motorid.bench.truth import Truth
-    from motorid.identify.bayes import sample_posterior
-
     spec, truth, prots = _setup()
     rng = np.random.default_rng(20180101)
     center = dict(truth.params)
@@ -421,7 +476,10 @@ def sbc(quick: bool, budget_s: float):
     max_rep = 5 if quick else 600
     ranks, names, t0, conv, secs, sig_brk, brk_mode = [], None, time.time(), 0, [], [], set()
     pair_res, zs, res_rows, design, pairs0 = [], [], [], None, None
-    while len(ranks) < max_rep and (time.time() - t0 < budget_s or len(ranks) < 5):
+    # the draws and seeds come from rng in the same order as the one-at-a-time loop did; the
+    # replications run as tasks on Dask in batches, until the budget is spent (at least 5)
+    jobs = []
+    for _ in range(max_rep):
         draw = {}
         for k, (m, s) in prior.items():
             while True:  # truncated to the positive side for positive parameters
@@ -429,27 +487,27 @@ def sbc(quick: bool, budget_s: float):
                 if x > 0 or k.startswith("KL_"):
                     break
             draw[k] = float(x)
-        t = Truth(params=draw, mechanisms=(), source="sbc draw")
-        r = replicate(int(rng.integers(1 << 30)), spec, t, prots)
-        ls = r["ls"]
-        sb = ls.noise.get("breakaway") or np.nan
+        rep_seed = int(rng.integers(1 << 30))
+        jobs.append({"draw": draw, "seed": rep_seed, "post_seed": int(rng.integers(1 << 30)), "prior": prior})
+    results = []
+    with _bench_client() as client:
+        batch = max(1, sum(client.nthreads().values()))
+        while len(results) < max_rep and (time.time() - t0 < budget_s or len(results) < 5):
+            results += _map(client, sbc_task, jobs[len(results):len(results) + batch], "SBC replications")
+    for r in results:
+        sb = r["sigma_brk"] or np.nan
         pair_res += [(r["brk"][a] / sb, r["brk"][b] / sb) for a, b in r["pairs"]]
         res_rows.append({k: v / sb for k, v in r["brk"].items()})
         design = design or r["brk_design"]
         pairs0 = pairs0 or r["pairs"]
-        zs.append([(ls.values[k] - draw[k]) / ls.std[k] for k in ("KFS", "Ks")])
-        sig_brk.append(ls.noise.get("breakaway") or np.nan)
+        zs.append(r["z"])
+        sig_brk.append(r["sigma_brk"] or np.nan)
         if names is None:
-            names = list(ls.free)
-        ts = time.time()
-        post = sample_posterior(ls, spec, seed=int(rng.integers(1 << 30)), progress=False, max_seconds=60,
-                                prior={k: prior[k] for k in ls.free})
-        secs.append(time.time() - ts)
-        brk_mode.add(post.breakaway_noise)
-        conv += bool(post.converged)
-        s = post.samples()
-        pick = s[np.linspace(0, len(s) - 1, SBC_DRAWS).astype(int)]
-        ranks.append([int(np.sum(pick[:, post.names.index(k)] < draw[k])) for k in names])
+            names = list(r["free"])
+        secs.append(r["sec_post"])
+        brk_mode.add(r["breakaway_noise"])
+        conv += r["converged"]
+        ranks.append([r["ranks"][k] for k in names])
     ranks = np.array(ranks)
     n = len(ranks)
     # how much the events' correlated errors widen K_FS's and K_s's true spread: the covariance
