@@ -26,7 +26,7 @@ from motorid.errors import InputError
 
 CAMPAIGN_FILE = "campaign.toml"
 MOTOR_FILE = "motor.toml"
-#: file names the log reader takes (motorid.logs reads a folder's *.csv and *.csv.gz)
+#: file names the log reader takes (motorid.io.logs reads a folder's *.csv and *.csv.gz)
 LOG_SUFFIXES = (".csv", ".csv.gz")
 _KEYS = ("serial", "date", "bench", "motor_type")
 

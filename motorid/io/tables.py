@@ -187,7 +187,7 @@ def _map_table_columns(path: Path, fields: list):
 def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
     """Read and validate one operating-point table (CSV or CSV.gz) into SI arrays.
 
-    path : the table file; spec : :class:`motorid.spec.MotorSpec` (its oil gives μ
+    path : the table file; spec : :class:`motorid.model.MotorSpec` (its oil gives μ
     from ``oil_temp_C``, or from ``[oil] temp_C`` where the table has neither
     column; its displacement where the table has no ``displacement_cm3``);
     require_outputs : a fit needs at least one output column (``motorid predict``
