@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import io
-import json
 import platform
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import numpy as np
 
 from motorid import model
 from motorid._atomic import write_bytes_atomic
+from motorid.io.results import write_json
 from motorid.identify.covariance import interval_dof, interval_factor
 from motorid.identify.types import CHANNEL_UNITS, FitResult
 
@@ -137,9 +137,8 @@ def dataset_summary(ds) -> dict:
     }
 
 
-def write_json_atomic(doc: dict, path) -> Path:
-    text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
-    return write_bytes_atomic(path, text.encode())
+#: result.json written whole or not at all (the one JSON writer, motorid.io.results)
+write_json_atomic = write_json
 
 
 def write_chain(bayes, path) -> Path:
