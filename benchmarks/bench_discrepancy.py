@@ -124,8 +124,13 @@ def replicate(job: dict) -> dict:
 
 def run(quick: bool = False, scheduler: str | None = None) -> str:
     """Every replication runs as a task on Dask (motorid.fleet.map_tasks: an embedded LocalCluster,
-    or the cluster at ``scheduler``); same seeds, same outcomes as the plain loop."""
+    or the cluster at ``scheduler``, default $MOTORID_BENCH_SCHEDULER); same seeds, same outcomes as the
+    plain loop."""
+    import os
+
     from motorid.fleet import map_tasks
+
+    scheduler = scheduler or os.environ.get("MOTORID_BENCH_SCHEDULER") or None
 
     reps = 1 if quick else 3
     fractions = [0.1, 0.25, 0.5, 1.0] if not quick else [0.25, 1.0]
