@@ -87,7 +87,7 @@ def map_section(seed: int = 7) -> list[str]:
     import pandas as pd
 
     from motorid.bench.maps import map_grid, simulate_map
-    from motorid.identify.table_pipeline import diagnose_table
+    from motorid.discrepancy.tables import diagnose_table
     from motorid.io.tables import read_table
     from motorid.model import MotorSpec, OilSpec
 

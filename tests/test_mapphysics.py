@@ -229,7 +229,7 @@ def test_diagnose_finds_mixed_lubrication_on_a_simulated_four_quadrant_loss_map(
     import pandas as pd
 
     from motorid.bench.maps import map_grid, simulate_map
-    from motorid.identify.table_pipeline import diagnose_table
+    from motorid.discrepancy.tables import diagnose_table
     from motorid.io.tables import read_table
     from motorid.io.spec import OilSpec
 
