@@ -29,7 +29,7 @@ from generate_maps import CASES, PUMP_PROTOCOL  # noqa: E402
 from motorid.bench.protocols import load_protocol, parse_protocol, read_toml  # noqa: E402
 from motorid.bench.simulate import simulate_campaign  # noqa: E402
 from motorid.bench.truth import Truth  # noqa: E402
-from motorid.discrepancy import catalog  # noqa: E402
+from motorid.physics import registry as catalog  # noqa: E402
 from motorid.discrepancy.select import diagnose  # noqa: E402
 from motorid.identify.extract import extract  # noqa: E402
 from motorid.io.spec import load_motor_spec, parse_motor_spec  # noqa: E402
