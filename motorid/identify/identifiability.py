@@ -11,7 +11,8 @@ from typing import Sequence
 import numpy as np
 
 
-def _spread(x) -> float:
+def relative_spread(x) -> float:
+    """The 2-98 % range of the finite values of ``x`` over their largest magnitude [-]; 0 for fewer than two."""
     x = np.asarray(x, dtype=float)
     x = x[np.isfinite(x)]
     if x.size < 2:
@@ -41,9 +42,9 @@ def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
             reasons[k] = "no running-torque samples in these logs"
     else:
         mu_w = np.asarray(s.viscosity * s.speed)[tq]
-        if _spread(np.abs(mu_w)) < 0.05:
+        if relative_spread(np.abs(mu_w)) < 0.05:
             reasons["Kv"] = "running torque at a single speed·viscosity level: viscous and Coulomb friction cannot be told apart"
-        if _spread(psum[tq]) < 0.05:
+        if relative_spread(psum[tq]) < 0.05:
             msg = "running torque at a single port-pressure sum P_A+P_B: K_F and T_Fc cannot be told apart"
             reasons["KF"] = msg
             reasons["TFc"] = msg
@@ -54,7 +55,7 @@ def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
                f"{n_ev} breakaway(s) found, but no torque reading while the shaft was held")
         for k in ("KFS", "Ks"):
             reasons[k] = why
-    elif good_ev.sum() < 3 or _spread(np.asarray(data.events.p_a + data.events.p_b)[good_ev]) < 0.05:
+    elif good_ev.sum() < 3 or relative_spread(np.asarray(data.events.p_a + data.events.p_b)[good_ev]) < 0.05:
         msg = "breakaway at a single port-pressure level: K_FS and K_s cannot be told apart"
         reasons["KFS"] = msg
         reasons["Ks"] = msg

@@ -38,7 +38,7 @@ import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
 from motorid import model
-from motorid.identify.identifiability import coverage_reasons
+from motorid.identify.identifiability import coverage_reasons, relative_spread
 from motorid.identify.types import FitResult
 from motorid.model import Channels
 
@@ -84,13 +84,6 @@ def point_channels(params: dict, spec, samples, displacement=None, mechanisms: S
 # ----------------------------------------------------------------------------- what a table identifies
 
 
-def _spread(x) -> float:
-    x = np.asarray(x, dtype=float)
-    x = x[np.isfinite(x)]
-    if x.size < 2:
-        return 0.0
-    lo, hi = np.percentile(x, [2, 98])
-    return float((hi - lo) / max(np.max(np.abs(x)), 1e-300))
 
 
 def table_coverage_reasons(table, spec, names: Sequence[str]) -> dict:
@@ -102,10 +95,10 @@ def table_coverage_reasons(table, spec, names: Sequence[str]) -> dict:
         for k in ("Kv", "KF", "TFc"):
             reasons[k] = "the table has no torque column (or fewer than 3 torque readings)"
     else:
-        if _spread(np.abs(table.viscosity * table.speed)[tq]) < 0.05:
+        if relative_spread(np.abs(table.viscosity * table.speed)[tq]) < 0.05:
             reasons["Kv"] = ("torque at a single speed·viscosity level: viscous and Coulomb friction cannot be "
                              "told apart")
-        if _spread((table.displacement * (table.p_a + table.p_b))[tq]) < 0.05:
+        if relative_spread((table.displacement * (table.p_a + table.p_b))[tq]) < 0.05:
             msg = "torque at a single port-pressure sum P_A+P_B: K_F and T_Fc cannot be told apart"
             reasons["KF"] = reasons["TFc"] = msg
     for k in ("KFS", "Ks"):
