@@ -34,15 +34,23 @@ COMMANDS = (
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="motorid", description="The ``motorid`` command line.")
+    p.add_argument("--quiet", "-q", dest="quiet_all", action="store_true",
+                   help="no progress bars (they show only on a terminal anyway)")
     sub = p.add_subparsers(dest="command", required=True)
     for command in COMMANDS:
         command.register(sub)
+    for name, command_parser in sub.choices.items():  # every command takes --quiet too
+        if not any("--quiet" in a.option_strings for a in command_parser._actions):
+            command_parser.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from motorid.progress import set_quiet
+
+    set_quiet(args.quiet_all or getattr(args, "quiet", False))
     try:
         return int(args.func(args) or 0)
     except InputError as exc:
