@@ -148,10 +148,13 @@ def _save(path: Path, compiled, hlo_text: str) -> None:
 class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
     """``equinox.filter_jit`` whose compiled programs persist across processes (module docstring)."""
 
+    _instances: list = []  # every cached_jit of the process (for release)
+
     def __init__(self, fun):
         self.fun = fun
         self.name = f"{fun.__module__}.{fun.__qualname__}"
         self._memory: dict = {}
+        cached_jit._instances.append(self)
         self.__wrapped__ = fun
         self.__doc__ = fun.__doc__
 
@@ -181,6 +184,18 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
                 return out
             self._memory[key] = compiled
         return compiled(dyn)
+
+    @classmethod
+    def release(cls, static_object) -> int:
+        """Drop from memory every compiled program one of whose static arguments is
+        ``static_object`` (a mechanism tried once, by diagnose): its executable is freed; a
+        later call loads it from disk again → how many were dropped."""
+        dropped = 0
+        for inst in cls._instances:
+            for key in [k for k in inst._memory if any(x is static_object for x in k[1])]:
+                del inst._memory[key]
+                dropped += 1
+        return dropped
 
     def _call_flat(self, dyn, leaves, dynamic, treedef):
         full = list(leaves)

@@ -5,10 +5,12 @@ Forward selection over the catalog (the registry of mechanisms, :mod:`motorid.ph
 1. fit the base model; :func:`~motorid.discrepancy.locate.locate` its residuals;
 2. if structure is found, fit the current model plus each candidate mechanism
    that touches a channel with structure, with the noise levels and outlier
-   set of the base fit held fixed so that χ² values compare;
+   set of the base fit held fixed so that χ² values compare — on the reduced
+   data (:mod:`motorid.discrepancy.screen`: cell means of a coarse shaft-angle
+   grid, no per-sample work), the finalist then refitted on every sample;
 3. score each by evidence that punishes extra parameters,
    ΔBIC = Δχ² − k ln N (k extra parameters, N residuals), and the best few by
-   the χ² of runs held out of the fit (K-fold over runs);
+   the χ² of runs held out of the fit (K-fold over runs, on the same cells);
 4. keep the best if ΔBIC exceeds ``min_evidence``, the held-out error falls
    and it removes some located structure; repeat while structure remains;
 5. refit the final model (noise re-estimated) and report what is left
@@ -17,11 +19,14 @@ Forward selection over the catalog (the registry of mechanisms, :mod:`motorid.ph
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from motorid._aot import cached_jit
 from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
+from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen
 from motorid.identify.least_squares import fit_least_squares
 from motorid.identify.types import FitOptions, FitResult
 from motorid.physics.registry import all_mechanisms
@@ -50,6 +55,7 @@ class Diagnosis:
     # issue 15: candidates refused as stand-ins, and the unexplained structure in words with empirical terms
     refused: list = field(default_factory=list)  # [{id, why, extrapolation}]
     unexplained_detail: list | None = None  # unexplained.unexplained_entries
+    seconds: dict = field(default_factory=dict)  # wall time per step (issue 16)
 
 
 def _fixed(ls: FitResult) -> tuple[dict, dict]:
@@ -73,28 +79,6 @@ def _folds(dataset, k: int) -> list[np.ndarray]:
     return [np.array(f, dtype=int) for f in folds]
 
 
-def _held_out_chi2(dataset, spec, mechanisms, noise, inliers, initial, folds) -> float:
-    run_of = np.asarray(dataset.run_of_sample, dtype=int)
-    ev_run = np.asarray(getattr(dataset, "run_of_event", np.zeros(0, int)), dtype=int)
-    total = 0.0
-    for fold in folds:
-        keep = {}
-        held = {}
-        for c, mask in inliers.items():
-            where = np.isin(ev_run, fold) if c == "breakaway" else np.isin(run_of, fold)
-            keep[c] = mask & ~where
-            held[c] = mask & where
-        fit = fit_least_squares(dataset, spec, mechanisms, FitOptions(fixed_noise=noise, fixed_inliers=keep),
-                                initial=initial)
-        for c, mask in held.items():
-            if not mask.any():
-                continue
-            sig = np.full(mask.shape, noise[c]) if c == "breakaway" else np.asarray(noise[c])[run_of]
-            r = fit.residuals[c][mask] / sig[mask]
-            total += float(np.sum(np.minimum(r**2, 25.0)))  # a held-out spike counts like an outlier
-    return total
-
-
 def _starts(current: dict, mech) -> list:
     """Starting points for a candidate: the current fit with the mechanism at its
     typical size, smaller and larger, and the default start (a nonlinear
@@ -106,20 +90,6 @@ def _starts(current: dict, mech) -> list:
     for factor in (0.25, 4.0):
         out.append({**current, **{k: v * factor if mech.parameters[k].positive else v for k, v in init.items()}})
     return out
-
-
-def _best_of_starts(dataset, spec, mechanisms, noise, inliers, current, mech) -> FitResult:
-    """Screen the starts with a few Levenberg-Marquardt steps, finish the best."""
-    best = None
-    for start in _starts(current, mech):
-        fit = fit_least_squares(dataset, spec, mechanisms,
-                                FitOptions(fixed_noise=noise, fixed_inliers=inliers, max_steps=12), initial=start)
-        if np.isfinite(fit.chi2) and (best is None or fit.chi2 < best.chi2):
-            best = fit
-    if best is None:
-        return fit
-    return fit_least_squares(dataset, spec, mechanisms, FitOptions(fixed_noise=noise, fixed_inliers=inliers),
-                             initial=best.params_all)
 
 
 def _tied(scored: list, min_evidence: float) -> bool:
@@ -139,67 +109,139 @@ def _structure_key(s) -> tuple:
     return (s.channel, s.variable, s.order)
 
 
+def _full_fit(dataset, spec, mechanisms, noise, inliers, initial) -> FitResult:
+    """A finalist refitted on every sample (the fit's own cells), noise and inliers held."""
+    return fit_least_squares(dataset, spec, mechanisms, FitOptions(fixed_noise=noise, fixed_inliers=inliers),
+                             initial=initial)
+
+
+def _screen_candidates(screen, catalog, current_mechs, current, channels, dataset, n_res, say) -> list:
+    """Every catalog mechanism that shows where structure was found, fitted on the screening
+    cells from several starts → [Candidate] (fit: the CellFit), best first."""
+    from motorid.progress import bar
+
+    todo = [m for m in catalog
+            if m not in current_mechs and channels & set(getattr(m, "shows_in", m.channels))
+            and getattr(m, "seen_by", lambda ds: True)(dataset)]  # e.g. pump-mode law: no pump runs
+    scored = []
+    for mech in bar(todo, desc="candidates", unit="mechanism"):
+        fit = screen.fit_best_start(current_mechs + [mech], _starts(current.params_all, mech))
+        d = current.chi2 - fit.chi2
+        k = sum(1 for p in mech.parameters if p in fit.free)
+        scored.append(Candidate(mech, fit, d, d - k * np.log(n_res)))
+        cached_jit.release(mech)  # its compiled programs: memory does not grow with the catalog
+    scored.sort(key=lambda c: -c.delta_bic)
+    return scored
+
+
+def _near_tie(scored: list, min_evidence: float) -> bool:
+    """The two best are close enough that the coarse cells could order them wrongly."""
+    return (len(scored) >= 2 and scored[1].delta_bic > min_evidence
+            and min(scored[0].delta_bic - scored[1].delta_bic, scored[0].delta_chi2 - scored[1].delta_chi2)
+            < 3 * min_evidence)
+
+
+def _refit_in_full(cands: list, dataset, spec, current_mechs, noise, inliers, current_full, n_res) -> None:
+    """Replace the screened numbers of ``cands`` by those of a fit on every sample."""
+    for cand in cands:
+        full = _full_fit(dataset, spec, current_mechs + [cand.mechanism], noise, inliers, cand.fit.params_all)
+        cand.screened = (cand.delta_chi2, cand.delta_bic)
+        cand.fit = full
+        cand.delta_chi2 = current_full.chi2 - full.chi2
+        k = sum(1 for p in cand.mechanism.parameters if full.identifiable.get(p))
+        cand.delta_bic = cand.delta_chi2 - k * np.log(n_res)
+
+
 def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
              alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 3, cv_top: int = 1,
-             max_mechanisms: int = 3, progress=None, check_regions: bool = False) -> Diagnosis:
-    """Find, name and model what the base model leaves out (see module doc)."""
+             max_mechanisms: int = 3, progress=None, check_regions: bool = False,
+             screen_bins_per_pitch: int = SCREEN_BINS_PER_PITCH) -> Diagnosis:
+    """Find, name and model what the base model leaves out (see module doc).
+
+    Candidates are screened on the reduced data (:mod:`motorid.discrepancy.screen`); only the
+    finalist (the two best where they come close) is refitted on every sample."""
     from motorid.discrepancy.unexplained import extrapolation_check, unexplained_entries
 
     say = progress or (lambda msg: None)
+    seconds: dict = {}
+    clock = [time.perf_counter()]
+
+    def lap(step: str) -> None:
+        now = time.perf_counter()
+        seconds[step] = seconds.get(step, 0.0) + now - clock[0]
+        clock[0] = now
+
     refused: list = []
     catalog = list(mechanisms) if mechanisms is not None else all_mechanisms()
     base = base or fit_least_squares(dataset, spec)
+    lap("base fit")
     noise, inliers = _fixed(base)
     loc0 = locate(base, dataset, spec, alpha=alpha, min_effect=min_effect)
+    lap("locate structure (base)")
     current, current_mechs, accepted, steps = base, [], [], []
     loc = loc0
     fold_runs = _folds(dataset, folds)
     n_res = max(_n_residuals(base), 2)
+    screen = Screen(dataset, spec, base, screen_bins_per_pitch) if loc.significant else None
+    current_cells = screen.fit([], base.params_all) if screen is not None else None
     current_cv = None
+    reference = None
+    lap("screening cells")
     while loc.significant and len(accepted) < max_mechanisms:
         channels = {s.channel for s in loc.significant}
-        say(f"structure in {', '.join(sorted(channels))}; trying {len(catalog) - len(current_mechs)} mechanisms")
-        scored = []
-        for mech in catalog:
-            # shows_in: where its residual appears once the base fit has compromised (a case-meter gain shows
-            # in the port flows, as K_L0 follows the case meter); default: the channels it acts on
-            if mech in current_mechs or not channels & set(getattr(mech, "shows_in", mech.channels)):
-                continue
-            if not getattr(mech, "seen_by", lambda ds: True)(dataset):  # e.g. pump-mode law, no pump runs
-                continue
-            fit = _best_of_starts(dataset, spec, current_mechs + [mech], noise, inliers, current.params_all, mech)
-            d = current.chi2 - fit.chi2
-            k = sum(1 for p in mech.parameters if fit.identifiable.get(p))
-            scored.append(Candidate(mech, fit, d, d - k * np.log(n_res)))
+        say(f"structure in {', '.join(sorted(channels))}; screening the catalog on {screen.n_cells} cells")
+        scored = _screen_candidates(screen, catalog, current_mechs, current_cells, channels, dataset, n_res, say)
+        lap("candidates on the cells")
         if not scored:
             break
-        scored.sort(key=lambda c: -c.delta_bic)
+        if current is base and reference is None:
+            # the base model refitted like the candidates (noise and inliers held, from its optimum):
+            # the reference of their Δχ² on every sample, so that no candidate is credited with
+            # what further steps of the base fit itself would have found (a parameter creeping
+            # toward its bound)
+            reference = _full_fit(dataset, spec, [], noise, inliers, base.params_all)
+            if reference.chi2 > base.chi2:
+                reference = base
+        ref = reference if current is base else current
+        if _near_tie(scored, min_evidence):  # the coarse cells must not decide a close call
+            _refit_in_full(scored[:2], dataset, spec, current_mechs, noise, inliers, ref, n_res)
+            scored[:2] = sorted(scored[:2], key=lambda c: -c.delta_bic)
+            lap("finalists on every sample")
         if _tied(scored, min_evidence):  # two names explain it alike: naming one would be a guess
             steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
                            "cv_gain": None, "accepted": False, "tied": i < 2} for i, c in enumerate(scored)])
             say(f"{scored[0].mechanism.id} and {scored[1].mechanism.id} explain it alike; neither is named")
             break
         if current_cv is None and folds > 1:
-            current_cv = _held_out_chi2(dataset, spec, current_mechs, noise, inliers, current.params_all, fold_runs)
-        for cand in scored[:cv_top]:
-            if cand.delta_bic <= min_evidence or folds < 2:
-                continue
-            cv = _held_out_chi2(dataset, spec, current_mechs + [cand.mechanism], noise, inliers,
-                                cand.fit.params_all, fold_runs)
-            cand.cv_gain = current_cv - cv
-            cand.cv = cv
+            current_cv = screen.held_out_chi2(current_mechs, current_cells.params_all, fold_runs)
+            lap("held-out runs on the cells")
         best = None
         for cand in scored[:cv_top]:
-            if cand.delta_bic > min_evidence and (folds < 2 or (cand.cv_gain or 0) > 0):
-                after = locate(cand.fit, dataset, spec, alpha=alpha, min_effect=min_effect)
-                before_keys = {_structure_key(s) for s in loc.significant}
-                after_keys = {_structure_key(s) for s in after.significant}
-                removed = [s for s in loc.significant if _structure_key(s) in before_keys - after_keys]
-                if removed or len(after.significant) < len(loc.significant):
-                    cand.removed = removed
-                    cand.location = after
-                    best = cand
-                    break
+            if cand.delta_bic <= min_evidence:
+                continue
+            if folds > 1:
+                screened = cand.fit if isinstance(cand.fit, CellFit) else None
+                start = screened.params_all if screened is not None else cand.fit.params_all
+                cand.cv = screen.held_out_chi2(current_mechs + [cand.mechanism], start, fold_runs)
+                cand.cv_gain = current_cv - cand.cv
+                lap("held-out runs on the cells")
+                if cand.cv_gain <= 0:
+                    continue
+            cells = cand.fit if isinstance(cand.fit, CellFit) else None
+            if cells is not None:
+                _refit_in_full([cand], dataset, spec, current_mechs, noise, inliers, ref, n_res)
+                cand.cells = cells
+            lap("finalists on every sample")
+            after = locate(cand.fit, dataset, spec, alpha=alpha, min_effect=min_effect)
+            lap("locate structure (finalists)")
+            before_keys = {_structure_key(s) for s in loc.significant}
+            after_keys = {_structure_key(s) for s in after.significant}
+            removed = [s for s in loc.significant if _structure_key(s) in before_keys - after_keys]
+            if cand.delta_bic > min_evidence and (removed or len(after.significant) < len(loc.significant)):
+                cand.removed = removed
+                cand.location = after
+                best = cand
+                break
         if best is not None and check_regions:  # issue 15: a name must also predict where it was not fitted
             best.extrapolation = extrapolation_check(dataset, spec, current_mechs + [best.mechanism], noise,
                                                      inliers, best.fit)
@@ -210,6 +252,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
                 best = None
         steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
                        "cv_gain": c.cv_gain, "accepted": c is best,
+                       "screened_delta_chi2": getattr(c, "screened", (c.delta_chi2,))[0],
                        "extrapolation": getattr(c, "extrapolation", None)} for c in scored])
         if best is None:
             break
@@ -217,16 +260,22 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         accepted.append(best)
         current_mechs.append(best.mechanism)
         current = best.fit
+        current_cells = best.cells if hasattr(best, "cells") else screen.fit(current_mechs, current.params_all)
         current_cv = getattr(best, "cv", None)
         loc = best.location
+        lap("candidates on the cells")
     # final model with its own noise estimate
+    lap("selection bookkeeping")
     final = fit_least_squares(dataset, spec, current_mechs, initial=current.params_all) if accepted else base
+    lap("final fit")
     loc_after = locate(final, dataset, spec, alpha=alpha, min_effect=min_effect) if accepted else loc0
+    lap("locate structure (final)")
     unexplained = list(loc_after.significant)
     detail = unexplained_entries(unexplained, final, dataset, spec) if unexplained else []
+    lap("unexplained: words and empirical terms")
     return Diagnosis(mismatch=bool(accepted or unexplained), base=base, final=final, accepted=accepted,
                      location_before=loc0, location_after=loc_after, steps=steps, unexplained=unexplained,
-                     refused=refused, unexplained_detail=detail)
+                     refused=refused, unexplained_detail=detail, seconds=seconds)
 
 
 def _rms(ls: FitResult, c: str):
@@ -278,6 +327,7 @@ def diagnosis_document(dg: Diagnosis, spec) -> dict:
         "refused_stand_ins": dg.refused,
         "selection": dg.steps,
         "tests": {"count": dg.location_before.tests, "threshold_p": dg.location_before.threshold},
+        "seconds": dict(dg.seconds),
     }
     return _clean(doc)
 

@@ -29,7 +29,7 @@ from motorid.identify.types import RUNNING_CHANNELS, FitOptions, FitResult
 from motorid.robust import robust_std
 
 
-def _parameters(spec, mechanisms, opt: FitOptions, initial: dict | None):
+def start_values(spec, mechanisms, opt: FitOptions, initial: dict | None):
     """Every parameter's name and starting value: the spec's typical sizes, the mechanisms'
     initial values, then ``initial`` → (names, start)."""
     harmonics = spec.leak_harmonics if opt.harmonics is None else opt.harmonics
@@ -141,6 +141,9 @@ def _uncertainty(problem: Problem, values: dict, free: list, opt: FitOptions, re
     cells at the optimum, widened by the breakaway sandwich and by χ²/dof > 1, plus the
     smoothed viscosity's share → (cov, corr, std, cov_visc, visc_run_var, cov_brk)."""
     JtJ = np.zeros((0, 0))
+    if not opt.uncertainty:
+        n = len(free)
+        return np.zeros((n, n)), np.eye(n), np.zeros(n), None, {}, None
     if free:
         JtJ = backend_for(problem, values, free, opt).normal(values)[0]
     cov = covariance_from_normal(JtJ) if free else np.zeros((0, 0))
@@ -194,7 +197,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     initial : starting values (defaults: typical sizes, then a Gauss-Newton start)
     """
     opt = options or FitOptions()
-    names, start = _parameters(spec, mechanisms, opt, initial)
+    names, start = start_values(spec, mechanisms, opt, initial)
     reasons = coverage_reasons(data, spec, names)
     fixed = {k: float(v) for k, v in opt.fixed.items()}
     held = {k: start[k] for k in names if k in reasons}

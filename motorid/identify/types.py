@@ -226,6 +226,8 @@ class FitOptions:
     fixed_inliers: dict | None = None
     # carry the smoothed viscosity's run-level error (Dataset.viscosity_error) into the covariance
     viscosity_error: bool = True
+    # standard errors at all (a candidate screened by diagnose needs only its χ²)
+    uncertainty: bool = True
 
 
 @dataclass

@@ -1,0 +1,146 @@
+"""Candidates scored on the reduced data: cell means of a coarse shaft-angle grid.
+
+A candidate's evidence is how much it lowers χ², with the noise levels and the
+outlier set of the base fit held so that the numbers compare.  χ² over samples
+is χ² over cell means plus the scatter of the samples inside their cells; that
+scatter is the same for every model that is nearly constant over a cell (one run,
+one slice of the shaft angle), so Δχ² is read off the cells alone.  The cells
+here are coarser than the fit's (``bins_per_pitch`` per piston pitch, default 8:
+72 per revolution on a nine-piston motor, enough for every shaft order a
+mechanism of the catalog shows), which makes a candidate's fit cost a few
+thousand cells however long the logs, and none of the per-sample work (no
+per-sample predictions, noise rounds or outlier tests: those are the base fit's).
+
+The same cells give the held-out check: runs left out of a fit by zeroing their
+cells' weights, their χ² then taken at the fitted values.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from motorid.identify.identifiability import coverage_reasons
+from motorid.identify.least_squares import start_values
+from motorid.identify.problem import Problem, as_arrays, residual_jit
+from motorid.identify.solver import backend_for, solve
+from motorid.identify.types import CHANNELS, RUNNING_CHANNELS, FitOptions
+
+#: shaft-angle cells per piston pitch of the screening grid
+SCREEN_BINS_PER_PITCH = 8
+
+_versions = itertools.count(1 << 20)  # cells versions of the reweighted problems (never reused)
+
+
+@dataclass
+class CellFit:
+    """A model fitted on the screening cells.
+
+    values : every parameter (fitted and held) [SI]; free : the fitted ones;
+    chi2 : over the cells it was fitted on; problem : the cells and the model.
+    """
+
+    mechanisms: tuple
+    values: dict
+    free: list
+    chi2: float
+    problem: object
+
+    @property
+    def params_all(self) -> dict:
+        return self.values
+
+
+class Screen:
+    """The reduced data of a campaign, with the base fit's noise and inliers held."""
+
+    def __init__(self, dataset, spec, base, bins_per_pitch: int = SCREEN_BINS_PER_PITCH):
+        self.dataset, self.spec = dataset, spec
+        self.options = FitOptions(bins_per_pitch=bins_per_pitch, uncertainty=False, viscosity_error=False)
+        self.template = Problem(dataset, spec, [], {}, (), bins_per_pitch)
+        noise_runs = {c: np.asarray(base.noise_by_run[c], dtype=float) for c in RUNNING_CHANNELS
+                      if c in base.noise_by_run}
+        sigma_brk = np.asarray(base.sigma["breakaway"], dtype=float) if "breakaway" in base.sigma else None
+        self.template.set_cells(dict(base.inliers), noise_runs, sigma_brk)
+        obs, w = self.template.cells
+        # inlier samples per cell (events: 1), in the order of the concatenated residual
+        self.counts = {}
+        for c in obs:
+            if c == "breakaway":
+                self.counts[c] = np.ones_like(w[c])
+            else:
+                cnt = np.bincount(self.template.cell_of, weights=np.asarray(base.inliers[c], dtype=float),
+                                  minlength=self.template.n_cells)
+                self.counts[c] = np.concatenate([cnt, np.zeros(w[c].size - cnt.size)])
+        run_of_event = np.asarray(getattr(dataset, "run_of_event", np.zeros(0, int)), dtype=int)
+        self._run = {c: (np.concatenate([run_of_event, np.full(w[c].size - run_of_event.size, -1)])
+                         if c == "breakaway" else
+                         np.concatenate([self.template.cell_run, np.full(w[c].size - self.template.n_cells, -1)]))
+                     for c in obs}
+
+    @property
+    def n_cells(self) -> int:
+        return self.template.n_cells
+
+    def _problem(self, mechanisms, free, held, weights=None) -> Problem:
+        prob = copy.copy(self.template)
+        prob.free, prob.held, prob.mechanisms = list(free), dict(held), tuple(mechanisms)
+        prob.expansion = prob.expansion_key = prob.compressed = None
+        if weights is not None:
+            prob.cells = (self.template.cells[0], weights)
+            prob.cells_version = next(_versions)
+        return prob
+
+    def fit(self, mechanisms, initial: dict, max_steps: int | None = None, weights=None) -> CellFit:
+        """Fit the base model plus ``mechanisms`` on the cells, from ``initial``."""
+        opt = self.options if max_steps is None else replace(self.options, max_steps=max_steps)
+        names, start = start_values(self.spec, mechanisms, opt, initial)
+        reasons = coverage_reasons(self.dataset, self.spec, names)
+        held = {k: start[k] for k in names if k in reasons}
+        free = [k for k in names if k not in held]
+        prob = self._problem(mechanisms, free, held, weights)
+        values = {k: float(start[k]) for k in free}
+        values, _, _, free, _ = solve(prob, values, free, reasons, opt, first=True)
+        chi2 = backend_for(prob, values, free, opt).chi2(values) if free else self._chi2(prob, values)
+        if not np.isfinite(chi2):
+            chi2 = np.inf
+        return CellFit(tuple(mechanisms), {**prob.held, **{k: float(v) for k, v in values.items()}},
+                       list(free), float(chi2), prob)
+
+    @staticmethod
+    def _chi2(prob, values) -> float:
+        r = np.asarray(residual_jit(as_arrays(values), prob.ctx()))
+        return float(r @ r)
+
+    def fit_best_start(self, mechanisms, starts: list) -> CellFit:
+        """Screen ``starts`` with a few Levenberg-Marquardt steps each, finish the best."""
+        best = None
+        for start in starts:
+            fit = self.fit(mechanisms, start, max_steps=12)
+            if np.isfinite(fit.chi2) and (best is None or fit.chi2 < best.chi2):
+                best = fit
+        if best is None:
+            return fit
+        if len(starts) == 1:
+            return self.fit(mechanisms, best.values)
+        final = self.fit(mechanisms, best.values)
+        return final if final.chi2 <= best.chi2 else best
+
+    def held_out_chi2(self, mechanisms, initial: dict, folds: list) -> float:
+        """χ² of each fold's runs predicted by a fit on the other runs, summed over the folds
+        (a cell's share capped at 25 per sample: a held-out spike counts like an outlier)."""
+        obs, w = self.template.cells
+        order = [c for c in CHANNELS if c in obs]
+        total = 0.0
+        for fold in folds:
+            out = {c: np.isin(self._run[c], fold) for c in order}
+            fit = self.fit(mechanisms, initial, weights={c: np.where(out[c], 0.0, w[c]) for c in order})
+            prob = self._problem(fit.mechanisms, fit.free, {k: v for k, v in fit.values.items() if k not in fit.free},
+                                 weights={c: np.where(out[c], w[c], 0.0) for c in order})
+            r = np.asarray(residual_jit(as_arrays({k: fit.values[k] for k in fit.free}), prob.ctx()))
+            cap = 25.0 * np.concatenate([np.maximum(self.counts[c], 1.0) for c in order])
+            total += float(np.sum(np.minimum(np.where(np.isfinite(r), r * r, 0.0), cap)))
+        return total
