@@ -252,7 +252,7 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
                     effect=worst[1], effect_sigma=abs(worst[1]) / worst[3] if worst[3] > 0 else np.inf,
                     where=_words_between(c, var, worst, runs, have, labels), groups=glist))
         # within runs: shaft orders and time
-        found += _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec)
+        found += _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec, per_run["speed"])
 
     if "breakaway" in ls.residuals and np.sum(ls.inliers["breakaway"]) >= 6:
         found += _breakaway_structures(ls, dataset, spec)
@@ -276,7 +276,28 @@ def _words_between(c, var, worst, runs, have, labels) -> str:
     return f"{CHANNEL_WORDS[c]} at {var} {name} {verb} by {_fmt(abs(m), c)} on average"
 
 
-def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec) -> list:
+def _ripple_size(amps, zamps, runs_seen, speed_groups):
+    """Size of a shaft-order ripple → (amplitude [SI], in noise levels, speed words or None).
+
+    A shaft-locked ripple may grow with speed (a transducer lag, a flow ripple ∝ ω) and be
+    nothing in the slow runs: its size is the median over the runs of the speed group where it
+    is largest, each run's amplitude over that run's own noise level (a structure confined to
+    the fast runs also raises their residual noise estimate, and the median over all runs
+    would hide it behind the slow ones).  Where the runs do not group by speed, the median over all.
+    """
+    amps, zamps, runs_seen = np.asarray(amps), np.asarray(zamps), np.asarray(runs_seen, dtype=int)
+    best = (float(np.median(amps)), float(np.median(zamps)), None)
+    if speed_groups is None:
+        return best
+    labels = speed_groups.values[runs_seen]
+    for lab in speed_groups.unique_order:
+        sel = labels == lab
+        if sel.sum() >= 2 and np.median(zamps[sel]) > best[1]:
+            best = (float(np.median(amps[sel])), float(np.median(zamps[sel])), lab)
+    return best
+
+
+def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec, speed_groups=None) -> list:
     theta = np.asarray(s.theta)
     t = np.asarray(s.time)
     speed = np.asarray(s.speed)
@@ -284,6 +305,8 @@ def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec) -> list:
     stat_k = np.zeros(kmax + 1)
     dof_k = np.zeros(kmax + 1, int)
     amp_k = [[] for _ in range(kmax + 1)]
+    zamp_k = [[] for _ in range(kmax + 1)]  # the same over the run's noise level
+    run_k = [[] for _ in range(kmax + 1)]
     stat_t, dof_t, trend = 0.0, 0, []
     for r in range(n_runs):
         sel = (run_of == r) & ok
@@ -309,6 +332,8 @@ def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec) -> list:
                 stat_k[k] += np.sum(fit**2) / inflate
                 dof_k[k] += 2
                 amp_k[k].append(np.hypot(*beta) * np.median(sig[sel]))
+                zamp_k[k].append(np.hypot(*beta))
+                run_k[k].append(r)
         # time trend within the run
         if np.ptp(tr) > 0:
             u = 2 * (tr - tr.min()) / np.ptp(tr) - 1
@@ -322,12 +347,13 @@ def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec) -> list:
     for k in range(1, kmax + 1):
         if dof_k[k] == 0:
             continue
-        amp = float(np.median(amp_k[k]))
+        amp, amp_sigma, at = _ripple_size(amp_k[k], zamp_k[k], run_k[k], speed_groups)
         kind = f"{k}× shaft order" + (f" ({k // spec.pistons}× piston order)" if k % spec.pistons == 0 else "")
         out.append(Structure(
             channel=c, variable="shaft angle", statistic=float(stat_k[k]), dof=int(dof_k[k]),
-            p_value=_chi2_sf(stat_k[k], dof_k[k]), effect=amp, effect_sigma=amp / noise if noise > 0 else np.inf,
-            where=f"{CHANNEL_WORDS[c]} varies with shaft angle at the {kind}, amplitude {_fmt(amp, c)}",
+            p_value=_chi2_sf(stat_k[k], dof_k[k]), effect=amp, effect_sigma=amp_sigma,
+            where=f"{CHANNEL_WORDS[c]} varies with shaft angle at the {kind}, amplitude {_fmt(amp, c)}"
+                  + (f" at speed {at}" if at else ""),
             order=k))
     if dof_t:
         amp = float(np.median(np.abs(trend))) if trend else 0.0

@@ -133,6 +133,7 @@ def _fmt(v, channel):
 def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = True) -> list:
     """One entry per channel with structure left: words, numbers and an empirical term where one holds."""
     from motorid.discrepancy.empirical import propose
+    from motorid.discrepancy.run_offsets import flow_balance, run_spread
 
     by_channel: dict = {}
     for s in structures:
@@ -140,6 +141,7 @@ def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = 
     entries = []
     regions = region_masks(dataset)
     run_of = np.asarray(dataset.run_of_sample, dtype=int)
+    balance = flow_balance(dataset) if any(c in ("q_a", "q_b", "q_case") for c in by_channel) else None
     for c, group in by_channel.items():
         group = sorted(group, key=lambda s: s.p_value)
         variables = list(dict.fromkeys(s.variable for s in group))
@@ -155,7 +157,22 @@ def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = 
         entry = {"channel": c, "where": group[0].where, "p_value": group[0].p_value, "effect": big.effect,
                  "effect_sigma": big.effect_sigma, "variables": variables, "shape": shape, "description": text,
                  "structures": [s.where for s in group], "empirical_term": None}
-        if propose_terms and c != "breakaway" and c in final.residuals:
+        spread = None
+        if c != "breakaway" and c in final.residuals:
+            ok_c = np.asarray(final.inliers[c])
+            noise = float(np.median(np.asarray(final.sigma[c])[ok_c])) if ok_c.any() else None
+            spread = run_spread(final.residuals[c], ok_c, dataset, noise)
+            entry["run_spread"] = spread
+            if spread["offset_like"]:  # issue 15: per-run zeros, said as such, never given a smooth law
+                words = (f"a spread of {_fmt(spread['tau'], c)} (σ) from run to run that runs at the same operating "
+                         f"point in the two directions do not share (correlation {spread['twin_correlation']:+.2f} "
+                         f"over {spread['twin_pairs']} pairs): like a transducer zero offset that changes between runs")
+                entry["shape"] = (entry["shape"] + "; " if entry["shape"] else "") + words
+                entry["description"] += f"; {words}"
+        if balance is not None and c in ("q_a", "q_b", "q_case"):
+            entry["flow_balance"] = balance
+            entry["description"] += f"; {balance['words']}"
+        if propose_terms and c != "breakaway" and c in final.residuals and not (spread and spread["offset_like"]):
             ok = np.asarray(final.inliers[c]) & np.isfinite(final.residuals[c])
             x = type(dataset.running)(*[np.asarray(f)[ok] if np.ndim(f) else f for f in dataset.running])
             masks = {k: np.asarray(v)[run_of][ok] for k, v in regions.items()}

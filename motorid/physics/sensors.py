@@ -194,6 +194,17 @@ class MeterGain(CatalogMechanism):
         self.parameters = {f"{self.id}.g": ParameterInfo(
             "-", f"relative gain error of the {word}: reading = (1 + g)·true {unit_words}", False, 0.01)}
 
+    def seen_by(self, dataset) -> bool:
+        """A flow meter's gain is tried only where the meters keep their zeros: where they wander from run
+        to run the fit cannot tell a gain from the zeros in the run means, and the mass balance's own
+        estimate of the gains (:func:`~motorid.physics.mass_balance.flow_balance`, with random-effects
+        weights) goes into the unexplained entry instead.  The torque transducer's gain is always tried."""
+        if self.channel == "torque":
+            return True
+        from motorid.physics.mass_balance import flow_zeros_wander
+
+        return not flow_zeros_wander(dataset)
+
     def running(self, params, spec, samples, ch):
         g = self.param(params, "g")
         return ch._replace(**{self.channel: getattr(ch, self.channel) * (1.0 + g)})

@@ -80,6 +80,11 @@ CASES = {
     "extra_case_leak_pa_pb": (9, 212, {}, {}, {"case_leak_pa_pb": 5e-20}),
     "extra_torque_order3_dp": (9, 213, {}, {}, {"torque_order3_dp": 2e-8}),
     "clean_9_seed214": (9, 214, {}, {}, {}),
+    # transducer zeros that differ run to run (σ of the offset per channel, SI), alone and with small gains
+    "per_run_offsets": (9, 215, {}, {"offset_sd": {"torque": 0.25, "q_a": 1e-6, "q_b": 1e-6}}, {}),
+    "gains_and_offsets": (8, 216, {}, {"gain": {"torque": 0.004, "q_a": -0.005, "q_case": 0.01},
+                                       "offset_sd": {"torque": 0.15, "q_a": 6e-7, "q_b": 6e-7,
+                                                     "q_case": 3e-8}}, {}),
 }
 
 
