@@ -115,13 +115,35 @@ def _full_fit(dataset, spec, mechanisms, noise, inliers, initial) -> FitResult:
                              initial=initial)
 
 
-def _screen_candidates(screen, catalog, current_mechs, current, channels, dataset, n_res, say) -> list:
+def _wandering_zeros(base: FitResult, dataset) -> dict:
+    """Running channels whose transducer zero seems to change from run to run (a spread of the
+    run means that twin runs at one operating point do not share: :func:`run_spread`) →
+    {channel: its run_spread}.  A mechanism acting on such a channel is not named: run-level
+    structure there may be the zeros, and a wrong name is worse than none."""
+    from motorid.discrepancy.run_offsets import run_spread
+
+    out = {}
+    for c in ("torque", "q_a", "q_b", "q_case"):
+        if c not in base.residuals or not np.any(base.inliers[c]):
+            continue
+        try:
+            spread = run_spread(base.residuals[c], base.inliers[c], dataset, noise=base.noise.get(c))
+        except Exception:  # noqa: BLE001 - too few runs or twins to tell: no verdict
+            continue
+        if spread.get("offset_like"):
+            out[c] = spread
+    return out
+
+
+def _screen_candidates(screen, catalog, current_mechs, current, channels, dataset, n_res, say,
+                       wandering: dict | None = None) -> list:
     """Every catalog mechanism that shows where structure was found, fitted on the screening
     cells from several starts → [Candidate] (fit: the CellFit), best first."""
     from motorid.progress import bar
 
     todo = [m for m in catalog
             if m not in current_mechs and channels & set(getattr(m, "shows_in", m.channels))
+            and not set(m.channels) & set(wandering or {})
             and getattr(m, "seen_by", lambda ds: True)(dataset)]  # e.g. pump-mode law: no pump runs
     scored = []
     for mech in bar(todo, desc="candidates", unit="mechanism"):
@@ -177,6 +199,12 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     lap("base fit")
     noise, inliers = _fixed(base)
     loc0 = locate(base, dataset, spec, alpha=alpha, min_effect=min_effect)
+    wandering = _wandering_zeros(base, dataset) if loc0.significant else {}
+    for c, spread in wandering.items():
+        say(f"{c}: the transducer zero seems to change from run to run; nothing is named on it")
+        refused.append({"id": f"any mechanism on {c}", "why": "per-run zero offsets: run means spread "
+                        f"{spread['tau']:.3g} (SI) beyond the noise and twin runs do not share it "
+                        f"(correlation {spread['twin_correlation']:.2f})", "extrapolation": None})
     lap("locate structure (base)")
     current, current_mechs, accepted, steps = base, [], [], []
     loc = loc0
@@ -190,7 +218,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     while loc.significant and len(accepted) < max_mechanisms:
         channels = {s.channel for s in loc.significant}
         say(f"structure in {', '.join(sorted(channels))}; screening the catalog on {screen.n_cells} cells")
-        scored = _screen_candidates(screen, catalog, current_mechs, current_cells, channels, dataset, n_res, say)
+        scored = _screen_candidates(screen, catalog, current_mechs, current_cells, channels, dataset, n_res, say,
+                                    wandering)
         lap("candidates on the cells")
         if not scored:
             break
