@@ -29,7 +29,7 @@ def run_table_fit(args, logs, tables, spec) -> int:
                          "reported)")
     out = Path(args.out)
     check_output(out, args.force)
-    tf = identify_tables(logs, tables, spec, harmonics=args.harmonics)
+    tf = identify_tables(logs, tables, spec, harmonics=args.harmonics, channels=getattr(args, "channels", None))
     comparison = compare(tf.table, spec) if len(tf.table) >= 10 else None
     inputs = {"logs": [str(p) for p in logs], "tables": [str(p) for p in tables], "motor": str(args.motor)}
     doc = table_result_document(tf, spec, inputs, comparison)
