@@ -68,3 +68,14 @@ def test_diagnose_names_film_heating_on_a_concealed_loss_map(tmp_path):
     k = "film_heating.c_N"
     assert abs(ls.values[k] - truth[k]) < 4 * ls.std[k] < truth[k], (ls.values[k], ls.std[k])
     assert abs(ls.values["Kv"] - truth["Kv"]) < 4 * ls.std["Kv"]
+
+
+def test_the_concealed_campaign_holds_no_truth():
+    """synthetic_data/concealed/film_heating (generate_maps.py; diagnose names it: bench_mapphysics and
+    docs/mechanisms.md): the campaign and the motor only, the truth kept apart."""
+    from conftest import REPO
+
+    root = REPO / "synthetic_data" / "concealed"
+    assert sorted(p.name for p in (root / "film_heating").iterdir()) == ["campaign.csv.gz", "motor.toml"]
+    assert "film_heating" not in (root / "film_heating" / "motor.toml").read_text()
+    assert "[mechanisms.film_heating]" in (root / "truths" / "film_heating.toml").read_text()
