@@ -138,7 +138,8 @@ def run(quick: bool = False) -> str:
              "pump-mode law.  Size 1 is the concealed campaign's (synthetic_data/concealed/truths/): mixed "
              "lubrication 1.2 % of the ideal torque fading at μ|ω|/|ΔP| = 3e-9; cross term 2 N·m at 250 bar and "
              "2500 rpm; filling 1.2 L/min at 2500 rpm; pump-mode friction ΔK_F = 1.5e-3 (3 N·m at 250 bar); film "
-             "heating c_N = 6e-5 s/Pa (the viscous loss 14 % below the isothermal one at 2500 rpm and 40 °C, 5 % at 70 °C).",
+             "heating c_N = 6e-5 s/Pa (the viscous loss 14 % below the isothermal one at 2500 rpm and 40 °C, "
+             "5 % at 70 °C).",
              "",
              "| mechanism | " + " | ".join(f"size × {f:g}" for f in fractions) + " | wrong names |",
              "|---|" + "---|" * (len(fractions) + 1)]

@@ -69,8 +69,8 @@ class FilmHeating(CatalogMechanism):
     channels = ("torque",)
     parameters = {
         "film_heating.c_N": ParameterInfo(
-            "s/Pa", "film heating coefficient: N = c_N μ ω² (β r²/12k), the viscous loss is K_v D μ ω/(1+N)", True,
-            2e-5),
+            "s/Pa", "film heating coefficient: N = c_N μ ω² (β r²/12k), the viscous loss is K_v D μ ω/(1+N)",
+            True, 2e-5),
     }
     signature = ("running torque vs speed: the viscous loss bends over at high speed (less than linear in ω), "
                  "more so in cold, viscous oil; the same at every pressure; the opposite sign of churning")
