@@ -92,6 +92,15 @@ def test_gridded_mat_map_with_channels_is_fitted_as_a_table(version, tmp_path, c
                    "--out", str(tmp_path / "r"), "--quiet"])
         assert rc == 0, capsys.readouterr().err
         doc = json.loads((tmp_path / "r" / "result.json").read_text())
+        # and motorid predict reads the same map through the same channel map
+        rc = main(["predict", str(tmp_path / "r"), str(path), "--channels", str(tmp_path / "map.toml"),
+                   "--out", str(tmp_path / "pred.csv")])
+        assert rc == 0, capsys.readouterr().err
+        pred = pd.read_csv(tmp_path / "pred.csv")
+        measured = -arrays["T"].ravel()  # motor sign, row-major as the [grid] reads it
+        measured = measured[np.isfinite(measured)]
+        assert len(pred) == measured.size
+        assert np.sqrt(np.mean((pred["torque_Nm"] - measured) ** 2)) < 1.3 * 0.2  # the map's noise
     assert doc["table"]["points"] == SPEEDS.size * DPS.size - 1
     p = doc["parameters"]
     for k in ("KFS", "Ks", "KL_a1"):

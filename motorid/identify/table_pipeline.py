@@ -19,16 +19,16 @@ def identify_tables(log_paths, table_paths, spec, mechanisms=(), harmonics=None,
     from motorid.io.tables import read_tables
 
     t0 = time.time()
-    from motorid.io.tables import _table_map
+    from motorid.io.tables import split_channel_map
 
-    cmap = _table_map(channels)
-    table = read_tables(table_paths, spec, channels=None if cmap is None or cmap.is_log else cmap)
+    table_map, log_map = split_channel_map(channels)
+    table = read_tables(table_paths, spec, channels=table_map)
     dataset = log_fit = None
     if log_paths:
         from motorid.identify.least_squares import FitOptions, fit_least_squares
         from motorid.identify.pipeline import load_campaign
 
-        _, dataset = load_campaign(log_paths, spec, cmap if cmap is not None and cmap.is_log else None)
+        _, dataset = load_campaign(log_paths, spec, log_map)
         log_fit = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=FitOptions(harmonics=harmonics))
     tf = fit_table(table, spec, mechanisms, dataset=dataset, log_fit=log_fit, harmonics=harmonics)
     tf.seconds = time.time() - t0

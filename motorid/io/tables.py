@@ -361,6 +361,15 @@ def _table_map(channels):
     return channels if isinstance(channels, ChannelMap) else load_channel_map(channels)
 
 
+def split_channel_map(channels) -> tuple:
+    """(map for the tables, map for the logs) from one ``channels`` argument (path or ChannelMap):
+    a map that names ``time_s`` is for logs, one that does not is for tables; (None, None) for None."""
+    cmap = _table_map(channels)
+    if cmap is None:
+        return None, None
+    return (None, cmap) if cmap.is_log else (cmap, None)
+
+
 def read_mapped_table(path, spec=None, channels=None, require_outputs: bool = True) -> PointTable:
     """A foreign operating-point map (a .mat with a [grid], HDF5, Parquet, xlsx, TDMS, MDF4, any
     delimited text) read through its channel map (``channels``: path or ChannelMap; None: the map
