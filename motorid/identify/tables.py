@@ -160,6 +160,7 @@ class TableFit:
     seconds: float = 0.0
     dataset: object = None
     notes: list = field(default_factory=list)
+    table_noise_floor: dict = field(default_factory=dict)  # channel → σ_floor,c [SI] where the table weights points
 
 
 class _Residual:
@@ -454,7 +455,8 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
                    noise_by_run=noise_by_run, outliers=outliers, used=used, chi2=chi2, dof=dof, steps=steps,
                    converged=converged, warnings=warnings, residuals=residuals, sigma=sigma, inliers=inliers,
                    params_all=params_all, mechanisms=tuple(mechanisms), problem=None)
-    return TableFit(ls, table, tnoise, pred, resid, sig, time.time() - t0, dataset)
+    floors = {c: v for c, v in floor_c.items() if table.weights_from.get(c, "none") != "none" and has[c].any()}
+    return TableFit(ls, table, tnoise, pred, resid, sig, time.time() - t0, dataset, table_noise_floor=floors)
 
 
 def table_document(tf: TableFit) -> dict:
@@ -466,7 +468,9 @@ def table_document(tf: TableFit) -> dict:
         "channels": t.channels(),
         "theta_average": "model.predict averaged over a revolution: S(θ) at its exact mean n/π, the rest over "
                          "K ≥ 64 evenly spread shaft angles (exact for trigonometric terms of order < K)",
-        "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s"} for c, v in tf.table_noise.items()},
+        "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s",
+                      **({"floor": tf.table_noise_floor[c]} if c in tf.table_noise_floor else {})}
+                  for c, v in tf.table_noise.items()},
         "weights_from": dict(t.weights_from),
         "variable_displacement": bool(t.variable_displacement),
         "residual_rms": {c: (float(np.sqrt(np.nanmean(r**2))) if np.isfinite(r).any() else None)
