@@ -177,9 +177,11 @@ class FitResult:
 
 def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = None, seed: int = 0,
         mechanisms: Sequence = (), motor_path=None, channels=None) -> FitResult:
-    """Identify the motor's parameters from bench logs (what ``motorid fit`` does).
+    """Identify the motor's parameters from bench logs and/or operating-point tables (what
+    ``motorid fit`` does).
 
-    logs : bench log paths; motor : :class:`MotorSpec` or a spec TOML path
+    logs : bench log and table paths (a table: no time column, or a foreign map read through a
+        ``channels`` map without time_s, e.g. a gridded .mat loss map); motor : :class:`MotorSpec` or a spec TOML path
     bayes : also sample the posterior with emcee (``seed`` seeds it)
     harmonics : order M of the K_L(θ) Fourier series [-] (default: the spec's)
     mechanisms : extra physics fitted too (ids of :mod:`motorid.physics.registry` or mechanisms)
@@ -192,6 +194,12 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
 
     spec = _spec(motor)
     logs = [logs] if isinstance(logs, (str, Path)) else list(logs)
+    from motorid.io.tables import split_logs_and_tables
+
+    log_paths, tables = split_logs_and_tables(logs, channels)
+    if tables:  # operating-point tables, alone or with logs (identify/table_pipeline.py)
+        return _fit_tables(log_paths, tables, spec, harmonics, _mechanisms(mechanisms), channels,
+                           _motor_input(motor, motor_path), bayes)
     res = identify(logs, spec, bayes=bayes, options=FitOptions(harmonics=harmonics), seed=seed,
                    mechanisms=_mechanisms(mechanisms), channels=channels)
     inputs = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}
@@ -200,6 +208,23 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
     doc = result_document(res.ls, spec, res.dataset, res.bayes, inputs, res.seconds, res.priors)
     doc["motor_spec"] = spec.to_toml()  # motorid predict and export need nothing else
     return FitResult(doc, spec, res)
+
+
+def _fit_tables(log_paths, tables, spec, harmonics, mechanisms, channels, motor_input, bayes) -> FitResult:
+    """The table branch of :func:`fit`: the joint fit, the held-out comparison with the classical
+    loss models (10 points or more), result.json as ``motorid fit`` writes it."""
+    from motorid.comparators.evaluate import compare
+    from motorid.identify.table_pipeline import identify_tables, table_result_document
+
+    if bayes:
+        raise InputError("bayes is not available with operating-point tables (the least-squares covariance is "
+                         "reported)")
+    tf = identify_tables(log_paths, tables, spec, mechanisms=mechanisms, harmonics=harmonics, channels=channels)
+    comparison = compare(tf.table, spec, mechanisms=mechanisms) if len(tf.table) >= 10 else None
+    inputs = {"logs": [str(p) for p in log_paths], "tables": [str(p) for p in tables], "motor": motor_input}
+    if channels is not None:
+        inputs["channels"] = str(getattr(channels, "path", channels))
+    return FitResult(table_result_document(tf, spec, inputs, comparison), spec, tf)
 
 
 def load_result(path) -> FitResult:

@@ -366,6 +366,10 @@ def test_mbari_recording_reads_through_its_map_with_physical_signs():
     spec_mod.loader.exec_module(make_points)
     mine = make_points.quasi_steady_points(f)
     shipped = pd.read_csv(MBARI_POINTS / "points.csv")
+    assert make_points.passive(shipped).all()  # no shipped point gives power out at shaft and ports alike
+    backwards = pd.DataFrame({"torque_Nm": [0.8, 0.8], "speed_rpm": [700, 700], "p_a_bar": [1, 15],
+                              "p_b_bar": [15, 1], "q_a_lpm": [0.5, 0.5]})
+    assert make_points.passive(backwards).tolist() == [False, True]
     shipped = shipped[shipped["recording"] == "FrictionIDMovesWithBiasCurr"].reset_index(drop=True)
     assert len(mine) == len(shipped) >= 10
     for col in ("speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm", "q_a_lpm"):

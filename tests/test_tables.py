@@ -404,3 +404,20 @@ def test_temperature_from_the_spec_where_the_table_has_none(tmp_path):
     mu = _map().drop(columns=["oil_temp_C"]).assign(viscosity_mPas=30.0)
     t = read_table(_write(mu, tmp_path / "mu.csv"), no_temp)
     np.testing.assert_allclose(t.viscosity, 0.030)
+
+
+def test_noise_floor_and_scale_recover_both_parts_of_a_points_sigma():
+    """σ_i² = σ_floor² + (s r_i)² (identify/tables.py): from residuals drawn with a known floor and
+    scale, maximum likelihood gives both back; with no floor, a floor far below the scale."""
+    from motorid.identify.tables import noise_floor_and_scale
+
+    rng = np.random.default_rng(4)
+    rel = 10 ** rng.uniform(-1.5, 1.0, 4000)  # averaging counts and spreads over two decades
+    for floor, scale in ((0.3, 0.07), (0.0, 0.5)):
+        r = rng.normal(0, np.sqrt(floor**2 + (scale * rel) ** 2))
+        f, s = noise_floor_and_scale(r, rel)
+        assert abs(s - scale) < 0.06 * scale, (s, scale)
+        if floor:
+            assert abs(f - floor) < 0.06 * floor, (f, floor)
+        else:
+            assert f < 0.02 * scale, f

@@ -31,7 +31,7 @@ def run(args) -> int:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
     from motorid.io.tables import split_logs_and_tables
 
-    logs, tables = split_logs_and_tables(args.logs)
+    logs, tables = split_logs_and_tables(args.logs, args.channels)
     if tables:  # operating-point tables: cli/tables.py
         from motorid.cli.tables import run_table_diagnose
 

@@ -33,7 +33,7 @@ def run(args) -> int:
     check_logs_exist(args.logs)
     from motorid.io.tables import split_logs_and_tables
 
-    logs, tables = split_logs_and_tables(args.logs)
+    logs, tables = split_logs_and_tables(args.logs, args.channels)
     if tables:  # operating-point tables (no time column): cli/tables.py
         from motorid.cli.tables import run_table_fit
 

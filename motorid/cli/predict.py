@@ -14,6 +14,8 @@ def register(sub):
     p.add_argument("--out", required=True, help="CSV to write")
     p.add_argument("--motor", default=None, help="motor spec TOML (default: the one stored in result.json)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--channels", default=None,
+                   help="channel-map TOML for points in a foreign format (e.g. a gridded .mat map; docs/formats.md)")
     p.set_defaults(func=run)
 
 
@@ -29,7 +31,7 @@ def run(args) -> int:
         raise InputError(f"--out {out}: is a folder; give a CSV file name")
     spec = load_motor_spec(args.motor) if args.motor else None
     result = load_result(args.result, spec)
-    table = read_tables(args.points, result[1], require_outputs=False)
+    table = read_tables(args.points, result[1], require_outputs=False, channels=args.channels)
     frame = predict_points(result, table)
     write_predictions(frame, out)
     print(f"wrote {out} ({len(frame)} points; bands: _lo95/_hi95 confidence of the model's value, "

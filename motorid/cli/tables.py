@@ -29,7 +29,7 @@ def run_table_fit(args, logs, tables, spec) -> int:
                          "reported)")
     out = Path(args.out)
     check_output(out, args.force)
-    tf = identify_tables(logs, tables, spec, harmonics=args.harmonics)
+    tf = identify_tables(logs, tables, spec, harmonics=args.harmonics, channels=getattr(args, "channels", None))
     comparison = compare(tf.table, spec) if len(tf.table) >= 10 else None
     inputs = {"logs": [str(p) for p in logs], "tables": [str(p) for p in tables], "motor": str(args.motor)}
     doc = table_result_document(tf, spec, inputs, comparison)
@@ -70,17 +70,18 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
 
     from motorid.cli._common import check_output
     from motorid.identify.results import write_json_atomic
-    from motorid.io.tables import read_tables
+    from motorid.io.tables import read_tables, split_channel_map
 
     out = Path(args.out)
     check_output(out, args.force, files=("diagnosis.json",))
-    table = read_tables(tables, spec)
+    table_map, log_map = split_channel_map(getattr(args, "channels", None))
+    table = read_tables(tables, spec, channels=table_map)
     dataset = log_fit = None
     if logs:
         from motorid.identify.least_squares import fit_least_squares
         from motorid.identify.pipeline import load_campaign
 
-        _, dataset = load_campaign(logs, spec)
+        _, dataset = load_campaign(logs, spec, log_map)
         log_fit = fit_least_squares(dataset, spec)
     show = sys.stderr.isatty()
     dg = diagnose_table(table, spec, min_evidence=args.min_evidence, dataset=dataset, log_fit=log_fit,

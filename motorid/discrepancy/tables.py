@@ -13,7 +13,8 @@ from motorid.errors import InputError
 
 def _profile_bic(tf) -> float:
     """BIC of a table fit with each channel's noise level profiled out:
-    Σ_c n_c ln(RSS_c / n_c) + k ln n (Gaussian likelihood; the relative weights held);
+    Σ_c [n_c ln(RSS_c / n_c) + 2 Σ_i ln w_i] + k ln n (Gaussian likelihood, σ_i = s_c w_i with w_i
+    each point's σ relative to the median, its noise floor included: identify/tables.py);
     in a joint fit the logs add their χ² at their own (held) noise levels and their count."""
     t = tf.table
     total, n_all = 0.0, 0
@@ -27,9 +28,11 @@ def _profile_bic(tf) -> float:
         ok = np.isfinite(t.measured[c])
         if not ok.any():
             continue
-        r = tf.table_residuals[c][ok] / t.relative_sigma[c][ok]
+        w = np.asarray(tf.table_sigma[c], float)[ok]  # each point's σ (its floor included), shape only
+        w = w / np.median(w)
+        r = tf.table_residuals[c][ok] / w
         n = int(ok.sum())
-        total += n * math.log(max(float(np.mean(r**2)), 1e-300))
+        total += n * math.log(max(float(np.mean(r**2)), 1e-300)) + 2.0 * float(np.sum(np.log(w)))
         n_all += n
     return total + len(tf.ls.free) * math.log(max(n_all, 1))
 

@@ -11,19 +11,24 @@ import numpy as np
 from motorid.errors import InputError
 
 
-def identify_tables(log_paths, table_paths, spec, mechanisms=(), harmonics=None):
-    """Read the tables (and logs), fit them jointly; returns a :class:`~motorid.identify.tables.TableFit`."""
+def identify_tables(log_paths, table_paths, spec, mechanisms=(), harmonics=None, channels=None):
+    """Read the tables (and logs), fit them jointly; returns a :class:`~motorid.identify.tables.TableFit`.
+    channels : a channel map (path or ChannelMap): for the tables where it maps no time_s (a foreign
+        map, e.g. a gridded .mat; io/tables.py), for the logs where it does."""
     from motorid.identify.tables import fit_table
     from motorid.io.tables import read_tables
 
     t0 = time.time()
-    table = read_tables(table_paths, spec)
+    from motorid.io.tables import split_channel_map
+
+    table_map, log_map = split_channel_map(channels)
+    table = read_tables(table_paths, spec, channels=table_map)
     dataset = log_fit = None
     if log_paths:
         from motorid.identify.least_squares import FitOptions, fit_least_squares
         from motorid.identify.pipeline import load_campaign
 
-        _, dataset = load_campaign(log_paths, spec)
+        _, dataset = load_campaign(log_paths, spec, log_map)
         log_fit = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=FitOptions(harmonics=harmonics))
     tf = fit_table(table, spec, mechanisms, dataset=dataset, log_fit=log_fit, harmonics=harmonics)
     tf.seconds = time.time() - t0

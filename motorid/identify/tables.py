@@ -19,7 +19,13 @@ angle), and whatever a missing output channel would have given
 Noise: each output channel c has one level s_c estimated from the residuals
 (a table has no first differences to estimate it from beforehand), times a
 relative factor per point from the table's ``*_std_*`` / ``n_samples`` columns
-where it has them (:class:`motorid.io.tables.PointTable`).  The fit is a
+where it has them (:class:`motorid.io.tables.PointTable`).  Where it has them, a
+point's σ also gets a floor that averaging does not lower:
+σ_i² = σ_floor,c² + (s_c r_i)², both levels by maximum likelihood on the residuals
+(:func:`noise_floor_and_scale`): the mean of many samples is no better than the
+bench's repeatability (sensor calibration and drift, an unrecorded temperature,
+what the model leaves out), and without the floor a point of a thousand samples
+would outweigh the table.  The fit is a
 bounded trust-region least squares (scipy) with the JAX Jacobian; the table
 part is linear in the base parameters, so it converges in a few steps, and the
 K-fold refits reuse one compiled residual (held-out points get weight 0).
@@ -28,6 +34,7 @@ K-fold refits reuse one compiled residual (held-out points get weight 0).
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -153,6 +160,7 @@ class TableFit:
     seconds: float = 0.0
     dataset: object = None
     notes: list = field(default_factory=list)
+    table_noise_floor: dict = field(default_factory=dict)  # channel → σ_floor,c [SI] where the table weights points
 
 
 class _Residual:
@@ -267,6 +275,27 @@ def _linear_start(spec, table, names, mechanisms) -> dict:
     return start
 
 
+def noise_floor_and_scale(residuals, relative, dof_factor: float = 1.0, start: float | None = None):
+    """(σ_floor, s) [unit of the residuals] maximizing the Gaussian likelihood of ``residuals``
+    with σ_i² = σ_floor² + (s · relative_i)²; ``dof_factor`` (n/dof ≥ 1) inflates the squared
+    residuals for the parameters fitted.  A floor below 10⁻⁶ of s is returned as 0."""
+    from scipy.optimize import minimize
+
+    r2 = np.asarray(residuals, float) ** 2 * dof_factor
+    q2 = np.asarray(relative, float) ** 2
+    s0 = float(np.sqrt(np.mean(r2 / q2))) if start is None else float(start)
+    s0 = max(s0, 1e-300)
+
+    def nll(th):  # th = log(σ_floor / s0), log(s / s0)
+        v = np.exp(2 * th[0]) + np.exp(2 * th[1]) * q2
+        return float(np.sum(np.log(v) + r2 / (s0 * s0 * v)))
+
+    best = min((minimize(nll, x0, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 2000})
+                for x0 in ([-3.0, 0.0], [0.0, -3.0], [-1.0, -1.0])), key=lambda o: o.fun)
+    floor, scale = s0 * math.exp(best.x[0]), s0 * math.exp(best.x[1])
+    return (0.0 if floor < 1e-6 * scale else floor), scale
+
+
 def _initial_sigma(y: np.ndarray) -> float:
     y = y[np.isfinite(y)]
     if y.size == 0:
@@ -323,8 +352,13 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
             cache[key] = _Residual(spec, table, names, free_now, held, scales, mechanisms, dataset)
         return cache[key]
 
+    floor_c = {c: 0.0 for c in TABLE_CHANNELS}  # σ_floor,c: set where the table weights its points
+
+    def point_sigma(c):
+        return np.sqrt(floor_c[c] ** 2 + (sigma_c[c] * table.relative_sigma[c]) ** 2)
+
     def weights():
-        return {c: np.where(has[c], 1.0 / (sigma_c[c] * table.relative_sigma[c]), 0.0) for c in TABLE_CHANNELS}
+        return {c: np.where(has[c], 1.0 / point_sigma(c), 0.0) for c in TABLE_CHANNELS}
 
     values = {k: float(start[k]) for k in free}
     for round_ in range(max(rounds, 1) + 1):
@@ -351,9 +385,15 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
             k = int(has[c].sum())
             if k == 0:
                 continue
-            r = (table.measured[c] - pred[c])[has[c]] / table.relative_sigma[c][has[c]]
+            tiny = 1e-12 * max(np.max(np.abs(table.measured[c][has[c]])), 1e-300)
             dof = max(k - len(free) * k / max(n_all, 1), 1.0)
-            sigma_c[c] = float(max(np.sqrt(np.sum(r**2) / dof), 1e-12 * max(np.max(np.abs(table.measured[c][has[c]])), 1e-300)))
+            if table.weights_from.get(c, "none") != "none" and k >= 10:
+                floor, scale = noise_floor_and_scale((table.measured[c] - pred[c])[has[c]],
+                                                     table.relative_sigma[c][has[c]], k / dof, sigma_c[c])
+                floor_c[c], sigma_c[c] = floor, float(max(scale, tiny))
+                continue
+            r = (table.measured[c] - pred[c])[has[c]] / table.relative_sigma[c][has[c]]
+            sigma_c[c] = float(max(np.sqrt(np.sum(r**2) / dof), tiny))
 
     prob = problem(free)
     x = np.array([values[k] for k in free]) / prob.scales if free else np.zeros(0)
@@ -393,7 +433,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     if not converged:
         warnings.append("the table fit stopped before converging (scipy least_squares, max_nfev)")
     resid = {c: table.measured[c] - pred[c] for c in TABLE_CHANNELS}
-    sig = {c: sigma_c[c] * table.relative_sigma[c] for c in TABLE_CHANNELS}
+    sig = {c: point_sigma(c) for c in TABLE_CHANNELS}
     tnoise = {c: (sigma_c[c] if np.isfinite(table.measured[c]).any() else None) for c in TABLE_CHANNELS}
     if log_fit is not None:
         noise, noise_by_run, outliers = dict(log_fit.noise), dict(log_fit.noise_by_run), dict(log_fit.outliers)
@@ -415,7 +455,8 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
                    noise_by_run=noise_by_run, outliers=outliers, used=used, chi2=chi2, dof=dof, steps=steps,
                    converged=converged, warnings=warnings, residuals=residuals, sigma=sigma, inliers=inliers,
                    params_all=params_all, mechanisms=tuple(mechanisms), problem=None)
-    return TableFit(ls, table, tnoise, pred, resid, sig, time.time() - t0, dataset)
+    floors = {c: v for c, v in floor_c.items() if table.weights_from.get(c, "none") != "none" and has[c].any()}
+    return TableFit(ls, table, tnoise, pred, resid, sig, time.time() - t0, dataset, table_noise_floor=floors)
 
 
 def table_document(tf: TableFit) -> dict:
@@ -427,7 +468,9 @@ def table_document(tf: TableFit) -> dict:
         "channels": t.channels(),
         "theta_average": "model.predict averaged over a revolution: S(θ) at its exact mean n/π, the rest over "
                          "K ≥ 64 evenly spread shaft angles (exact for trigonometric terms of order < K)",
-        "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s"} for c, v in tf.table_noise.items()},
+        "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s",
+                      **({"floor": tf.table_noise_floor[c]} if c in tf.table_noise_floor else {})}
+                  for c, v in tf.table_noise.items()},
         "weights_from": dict(t.weights_from),
         "variable_displacement": bool(t.variable_displacement),
         "residual_rms": {c: (float(np.sqrt(np.nanmean(r**2))) if np.isfinite(r).any() else None)

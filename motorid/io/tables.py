@@ -352,21 +352,100 @@ def concat_tables(tables: list) -> PointTable:
                       any(t.variable_displacement for t in tables))
 
 
-def read_tables(paths, spec=None, require_outputs: bool = True) -> PointTable:
-    """Read one or several tables (see :func:`read_table`) as one."""
-    return concat_tables([read_table(p, spec, require_outputs) for p in paths])
+def _table_map(channels):
+    """The channel map (path or ChannelMap) as a ChannelMap, or None."""
+    if channels is None:
+        return None
+    from motorid.io.channel_map import ChannelMap, load_channel_map
+
+    return channels if isinstance(channels, ChannelMap) else load_channel_map(channels)
 
 
-def split_logs_and_tables(paths) -> tuple[list, list]:
+def split_channel_map(channels) -> tuple:
+    """(map for the tables, map for the logs) from one ``channels`` argument (path or ChannelMap):
+    a map that names ``time_s`` is for logs, one that does not is for tables; (None, None) for None."""
+    cmap = _table_map(channels)
+    if cmap is None:
+        return None, None
+    return (None, cmap) if cmap.is_log else (cmap, None)
+
+
+def read_mapped_table(path, spec=None, channels=None, require_outputs: bool = True) -> PointTable:
+    """A foreign operating-point map (a .mat with a [grid], HDF5, Parquet, xlsx, TDMS, MDF4, any
+    delimited text) read through its channel map (``channels``: path or ChannelMap; None: the map
+    beside the file) into a :class:`PointTable`.  The mapped channels become a table in the
+    format's columns and units, written as a CSV whose floats read back exactly, and read by
+    :func:`read_table`: the same checks as for a table written by hand; errors name ``path``."""
+    import re
+    import tempfile
+
+    from motorid.io.formats import _write_exact_csv, find_channel_map, standard_table
+
+    path = Path(path)
+    cmap = _table_map(channels if channels is not None else find_channel_map(path))
+    if cmap is not None and cmap.is_log:
+        raise InputError(f"{path}: its channel map {cmap.path} maps time_s: a time series, not an "
+                         f"operating-point table")
+    frame = standard_table(path, cmap)
+    with tempfile.TemporaryDirectory(prefix="motorid-") as tmp:
+        twin = Path(tmp) / (path.name + ".csv")
+        _write_exact_csv(frame, twin)
+        try:
+            table = read_table(twin, spec, require_outputs)
+        except InputError as exc:
+            msg = str(exc).replace(str(twin), str(path))
+            msg = re.sub(r"\bline (\d+)", lambda m: f"row {int(m.group(1)) - 1}", msg)
+            raise InputError(msg + (f" (read through {cmap.path})" if cmap is not None else "")) from None
+    table.file = np.full(len(table), str(path), dtype=object)
+    return table
+
+
+def read_tables(paths, spec=None, require_outputs: bool = True, channels=None) -> PointTable:
+    """Read one or several tables (see :func:`read_table`) as one; a file in a foreign format,
+    or any file where ``channels`` (a channel map for tables) is given, through
+    :func:`read_mapped_table`."""
+    from motorid.io.formats import needs_foreign_reader
+
+    out = []
+    for p in paths:
+        if channels is not None or needs_foreign_reader(p):
+            out.append(read_mapped_table(p, spec, channels, require_outputs))
+        else:
+            out.append(read_table(p, spec, require_outputs))
+    return concat_tables(out)
+
+
+def split_logs_and_tables(paths, channels=None) -> tuple[list, list]:
     """Files given on the command line → (bench logs, operating-point tables); folders are
     expanded to their ``*.csv`` / ``*.csv.gz`` files.  A file is a table when its header
-    has no time column."""
+    has no time column, or when ``channels`` (a channel-map path or ChannelMap) maps no
+    ``time_s`` (an operating-point map such as a gridded .mat): then every file is a table."""
+    cmap = _table_map(channels)
+    if cmap is not None and not cmap.is_log:
+        files = []
+        for p in map(Path, paths):
+            if p.is_dir():
+                from motorid.io.formats import data_files_in
+
+                found = data_files_in(p)
+                if not found:
+                    raise InputError(f"{p}: directory holds no file motorid reads")
+                files += found
+            elif not p.exists():
+                raise InputError(f"{p}: no such file")
+            else:
+                files.append(p)
+        return [], files
     files = []
     for p in paths:
         p = Path(p)
         if p.is_dir():
             found = sorted(q for q in p.iterdir() if q.is_file() and
                            (q.name.endswith(".csv") or q.name.endswith(".csv.gz")))
+            if not found and (p / "channels.toml").is_file():  # a folder of mapped DAQ files
+                from motorid.io.formats import data_files_in
+
+                found = data_files_in(p)
             if not found:
                 raise InputError(f"{p}: directory holds no .csv or .csv.gz file")
             files += found
@@ -376,5 +455,14 @@ def split_logs_and_tables(paths) -> tuple[list, list]:
             files.append(p)
     logs, tables = [], []
     for f in files:
-        (tables if is_table(f) else logs).append(f)
+        (tables if _is_table_file(f) else logs).append(f)
     return logs, tables
+
+
+def _is_table_file(path) -> bool:
+    """A foreign file with a channel map beside it (formats.find_channel_map): a table where the map
+    has no time_s; any other file: :func:`is_table` (its header has no time column)."""
+    from motorid.io.formats import find_channel_map, needs_foreign_reader
+
+    beside = find_channel_map(path) if needs_foreign_reader(path) else None
+    return is_table(path) if beside is None else not _table_map(beside).is_log

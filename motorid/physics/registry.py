@@ -28,6 +28,7 @@ from motorid.physics.mode import PumpModeFriction
 from motorid.physics.ripple import MisalignmentRipple
 from motorid.physics import sensors, spec_errors
 from motorid.physics.sensors import TorqueOffset
+from motorid.physics.film_heating import FilmHeating
 from motorid.physics.viscosity import PressureViscosity
 from motorid.physics.volumetric import FillingLoss
 
@@ -44,6 +45,7 @@ _ALL = (
     PressureSpeedTorque(),
     FillingLoss(),
     PumpModeFriction(),
+    FilmHeating(),  # the viscous loss bending over at high speed (real maps, issue 20)
     *spec_errors.MECHANISMS,  # displacement_error, leak_phase
     *sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, sensor_lag_<channel>
 )

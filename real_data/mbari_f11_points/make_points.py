@@ -10,6 +10,12 @@ so that an inertia of even 1e-3 kg·m² adds under 0.03 N·m), with at least 25 
 current, flow from ram speed: PROVENANCE.md). Columns as BENCH_LOG_FORMAT.md "Operating-point
 tables", plus ``recording`` (the source file, for leave-one-recording-out tests) and
 ``accel_rpm_s`` (the cell's mean dn/dt, what inertia could add to its torque).
+
+A cell whose means break the first law is left out (:func:`passive`): a motor delivers power
+at its shaft only from the oil it takes in, so a point where the unit gives power out at
+both its shaft (T·ω > 0) and its ports ((p_A − p_B)·q_A < 0) is not a steady point of the
+unit (a transient the binning did not remove, or pressures read away from the ports).  The
+rule has no threshold and is applied before any fit; it drops 2 of the 107 cells (both in 2021.07.26, near 700 rpm).
 """
 
 from __future__ import annotations
@@ -55,12 +61,24 @@ def quasi_steady_points(frame: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def passive(points: pd.DataFrame) -> np.ndarray:
+    """True where the point does not give power out at both shaft and ports (the first law):
+    not (T·ω > 0 and (p_A − p_B)·q_A < 0)."""
+    shaft_out = points["torque_Nm"] * points["speed_rpm"] > 0
+    ports_out = (points["p_a_bar"] - points["p_b_bar"]) * points["q_a_lpm"] < 0
+    return ~(shaft_out & ports_out).to_numpy()
+
+
 def main() -> Path:
     from motorid.io.logs import read_logs
     from motorid.io.spec import load_motor_spec
 
     spec = load_motor_spec(RECORDINGS / "motor.toml")
     points = quasi_steady_points(read_logs(RECORDINGS, spec))
+    ok = passive(points)
+    for pid in points.loc[~ok, "point_id"]:
+        print(f"left out {pid}: power out at both the shaft and the ports (first law)")
+    points = points[ok]
     out = HERE / "points.csv"
     points.to_csv(out, index=False, float_format="%.6g", lineterminator="\n")
     print(f"wrote {out}: {len(points)} points from {points['recording'].nunique()} recordings")

@@ -32,6 +32,7 @@ CASES = {
     "pressure_speed_loss": (9, 22, {"pressure_speed_loss": {"C_x": 3e-10}}, False),
     "filling_loss": (9, 23, {"filling_loss": {"C_f": 3e-10}}, False),
     "pump_mode_friction": (8, 24, {"pump_mode_friction": {"dKF": 1.5e-3}}, True),
+    "film_heating": (9, 25, {"film_heating": {"c_N": 6e-5}}, False),
     "clean_pump_8_seed106": (8, 106, {}, True),
 }
 
