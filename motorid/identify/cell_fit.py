@@ -7,10 +7,13 @@ before the reduction.  Two solves:
 1. with the model-free noise levels the reduction estimated per run and channel
    (within-cell scatter and first differences: upper bounds, since they also hold
    the operating point's change within a cell or between samples);
-2. with the noise levels of the first solve's residuals: per run and channel
-   σ² = Σ count·(cell-mean residual)² / cells (a cell mean scatters as σ/√count; the
-   per-sample fit's residual variance, less the within-cell part, which the cell
-   model does not see), and the breakaway events' variance model
+2. with the noise levels of the first solve's residuals, per run and channel as the
+   per-sample fit takes them, σ² = σ₀² + b²: a cell mean's residual has
+   E[count·r̄²] = σ₀² + count·b², with σ₀ the sensor noise and b the model's misfit
+   in the cell, so σ₀² is the smaller of the model-free level and Σ count·r̄²/cells,
+   and b² = (Σ count·r̄² − cells·σ₀²)/Σ count (at one sample a cell this is the
+   per-sample residual variance; with many it does not count the misfit once per
+   sample of the cell), and the breakaway events' variance model
    (:func:`motorid.identify.noise.breakaway_noise`) from their residuals.
 
 χ², the degrees of freedom and the residual counts are then those of the samples:
@@ -92,8 +95,12 @@ def _residual_noise(ls: FitResult, data, model_free: dict) -> dict:
         n = np.where(inl, data.cells.counts[c], 0.0)
         ss = np.bincount(run_of, weights=n * r * r, minlength=sig0.size)
         cells = np.bincount(run_of, weights=inl.astype(float), minlength=sig0.size)
+        total = np.bincount(run_of, weights=n, minlength=sig0.size)
         with np.errstate(invalid="ignore", divide="ignore"):
-            sig = np.where(cells >= 5, np.sqrt(ss / np.maximum(cells, 1.0)), sig0)
+            between = ss / np.maximum(cells, 1.0)  # E = σ² + n̄·b²: b the model's misfit in a cell
+            s2 = np.fmin(sig0 ** 2, between)  # the sensor noise: the model-free level bounds it
+            misfit = np.maximum(ss - cells * s2, 0.0) / np.maximum(total, 1.0)  # b², once per sample
+            sig = np.where(cells >= 5, np.sqrt(s2 + misfit), sig0)
         out[c] = floor_noise(sig, np.asarray(data.measured[c], dtype=float))
     return out
 
@@ -111,8 +118,9 @@ def fit_cells(data, spec, mechanisms: Sequence = (), options: FitOptions | None 
     held = np.asarray(data.held_torque, dtype=float)
     if held.size:
         inliers["breakaway"] = np.isfinite(held)
-    ls = fit_least_squares(data, spec, mechanisms,
-                           replace(opt, fixed_noise=dict(noise), fixed_inliers=dict(inliers)), initial)
+    ls = fit_least_squares(data, spec, mechanisms,  # the covariance's viscosity share: second solve only
+                           replace(opt, fixed_noise=dict(noise), fixed_inliers=dict(inliers), viscosity_error=False),
+                           initial)
     fixed = _residual_noise(ls, data, noise)
     gamma = 0.0
     if held.size and "breakaway" in ls.residuals and np.isfinite(held).sum() >= 3:

@@ -263,7 +263,7 @@ def extract_cells(runs, spec: MotorSpec, settings: ExtractSettings | None = None
     not the rows.  Returns a :class:`Dataset` whose running rows are cells, with their
     sufficient statistics in ``Dataset.cells``.
     """
-    from motorid.identify.cells import CellReducer
+    from motorid.identify.cells import CellReducer, give_back_free_memory
     from motorid.progress import bar
 
     settings = settings or ExtractSettings()
@@ -276,6 +276,11 @@ def extract_cells(runs, spec: MotorSpec, settings: ExtractSettings | None = None
             cells.rows += run.n
             _extract_run(g, r, run.key, np.arange(run.n), run.columns, run.protocol, run.file, settings, cells)
             pbar.update(1)
+            if run.n > 50_000:
+                del run
+                give_back_free_memory()
     if not g.rows:
         raise InputError("no runs in these logs")
-    return _finish(spec, g, cells.running_samples, cells)
+    data = _finish(spec, g, cells.running_samples, cells)
+    give_back_free_memory()
+    return data
