@@ -7,7 +7,8 @@ before the reduction.  Two solves:
 1. with the model-free noise levels the reduction estimated per run and channel
    (within-cell scatter and first differences: upper bounds, since they also hold
    the operating point's change within a cell or between samples);
-2. with the noise levels of the first solve's residuals, per run and channel as the
+2. (twice, ``FitOptions.rounds``) with the noise levels of the last solve's residuals,
+   per run and channel as the
    per-sample fit takes them, σ² = σ₀² + b²: a cell mean's residual has
    E[count·r̄²] = σ₀² + count·b², with σ₀ the sensor noise and b the model's misfit
    in the cell, so σ₀² is the smaller of the model-free level and Σ count·r̄²/cells,
@@ -100,7 +101,10 @@ def _residual_noise(ls: FitResult, data, model_free: dict) -> dict:
             between = ss / np.maximum(cells, 1.0)  # E = σ² + n̄·b²: b the model's misfit in a cell
             s2 = np.fmin(sig0 ** 2, between)  # the sensor noise: the model-free level bounds it
             misfit = np.maximum(ss - cells * s2, 0.0) / np.maximum(total, 1.0)  # b², once per sample
-            sig = np.where(cells >= 5, np.sqrt(s2 + misfit), sig0)
+            # runs with too few cells keep their model-free level; runs with none (startability) stay
+            # NaN, so that they do not pull the median that floor_noise fills and floors with
+            raw = np.asarray(data.cells.noise[c], dtype=float)
+            sig = np.where(cells >= 5, np.sqrt(s2 + misfit), np.where(cells > 0, raw, np.nan))
         out[c] = floor_noise(sig, np.asarray(data.measured[c], dtype=float))
     return out
 
@@ -121,17 +125,20 @@ def fit_cells(data, spec, mechanisms: Sequence = (), options: FitOptions | None 
     ls = fit_least_squares(data, spec, mechanisms,  # the covariance's viscosity share: second solve only
                            replace(opt, fixed_noise=dict(noise), fixed_inliers=dict(inliers), viscosity_error=False),
                            initial)
-    fixed = _residual_noise(ls, data, noise)
     gamma = 0.0
-    if held.size and "breakaway" in ls.residuals and np.isfinite(held).sum() >= 3:
-        ev = data.events
-        x2 = np.asarray(ev.p_a, dtype=float) ** 2 + np.asarray(ev.p_b, dtype=float) ** 2
-        k = sum(1 for n in BREAKAWAY_ONLY if n in ls.free)
-        scale = float(np.nanmax(np.abs(held)))
-        fixed["breakaway"], inliers["breakaway"], gamma = _breakaway_levels(
-            ls.residuals["breakaway"], x2, k, opt.outlier_sigma, scale)
-    start = {k: v for k, v in ls.values.items() if v is not None}
-    ls = fit_least_squares(data, spec, mechanisms, replace(opt, fixed_noise=fixed, fixed_inliers=inliers), start)
+    for round_ in range(max(opt.rounds, 1)):  # as the per-sample fit: the noise re-estimated, solved again
+        fixed = _residual_noise(ls, data, noise)
+        if held.size and "breakaway" in ls.residuals and np.isfinite(held).sum() >= 3:
+            ev = data.events
+            x2 = np.asarray(ev.p_a, dtype=float) ** 2 + np.asarray(ev.p_b, dtype=float) ** 2
+            k = sum(1 for n in BREAKAWAY_ONLY if n in ls.free)
+            scale = float(np.nanmax(np.abs(held)))
+            fixed["breakaway"], inliers["breakaway"], gamma = _breakaway_levels(
+                ls.residuals["breakaway"], x2, k, opt.outlier_sigma, scale)
+        start = {k: v for k, v in ls.values.items() if v is not None}
+        last = round_ == max(opt.rounds, 1) - 1
+        ls = fit_least_squares(data, spec, mechanisms, replace(opt, fixed_noise=fixed, fixed_inliers=dict(inliers),
+                                                               viscosity_error=opt.viscosity_error and last), start)
     ls.breakaway_noise_shape = gamma
     _sample_statistics(ls, data)
     return ls
