@@ -30,6 +30,7 @@ from typing import Sequence
 
 import numpy as np
 
+from motorid.identify.cells import give_back_free_memory
 from motorid.identify.least_squares import fit_least_squares
 from motorid.identify.noise import breakaway_noise, floor_noise
 from motorid.identify.types import BREAKAWAY_ONLY, RUNNING_CHANNELS, FitOptions, FitResult
@@ -137,6 +138,8 @@ def fit_cells(data, spec, mechanisms: Sequence = (), options: FitOptions | None 
                 ls.residuals["breakaway"], x2, k, opt.outlier_sigma, scale)
         start = {k: v for k, v in ls.values.items() if v is not None}
         last = round_ == max(opt.rounds, 1) - 1
+        ls = None  # the last solve's problem and expansion go before the next is built
+        give_back_free_memory()
         ls = fit_least_squares(data, spec, mechanisms, replace(opt, fixed_noise=fixed, fixed_inliers=dict(inliers),
                                                                viscosity_error=opt.viscosity_error and last), start)
     ls.breakaway_noise_shape = gamma

@@ -49,20 +49,23 @@ def give_back_free_memory() -> None:
         pass
 
 
-def _bucket(n: int) -> int:
-    return max(64, 1 << max(int(n) - 1, 0).bit_length())
+#: samples of one call of the compiled S(θ) program: one shape for every run, however long
+PORT_SUM_CHUNK = 1 << 16
 
 
 def _port_sum(spec, theta: np.ndarray) -> np.ndarray:
-    """S(θ) of each sample, from the one model function; padded to a power of two so that
-    runs of similar length share one compiled program."""
+    """S(θ) of each sample, from the one model function, in chunks of one padded shape (one
+    compiled program, and temporaries the size of a chunk, not of the run)."""
     n = theta.size
-    size = _bucket(n)
-    pad = lambda x, v: np.concatenate([x, np.full(size - n, v)])  # noqa: E731
-    zero = np.zeros(size)
-    s = make_samples(spec, pad(theta, 0.0), zero, zero, zero, zero, np.ones(size), acceleration=zero,
-                     direction=zero, temperature=np.full(size, 40.0), time=zero)
-    return np.asarray(s.port_sum)[:n]
+    out = np.empty(n)
+    zero = np.zeros(PORT_SUM_CHUNK)
+    for a in range(0, n, PORT_SUM_CHUNK):
+        part = theta[a:a + PORT_SUM_CHUNK]
+        padded = np.concatenate([part, zero[: PORT_SUM_CHUNK - part.size]])
+        s = make_samples(spec, padded, zero, zero, zero, zero, np.ones(PORT_SUM_CHUNK), acceleration=zero,
+                         direction=zero, temperature=np.full(PORT_SUM_CHUNK, 40.0), time=zero)
+        out[a:a + part.size] = np.asarray(s.port_sum)[: part.size]
+    return out
 
 
 class CellReducer:
