@@ -121,20 +121,28 @@ def _plan_rows(dest: Path, factor: float) -> dict:
     return out
 
 
+#: runs the command from a small process and prints its peak RSS [KiB] and wall time [s] last on stderr.
+#: Linux keeps a process's peak RSS across exec, so a command forked straight from this (large)
+#: process would report at least this process's RSS; forked from the small wrapper it does not.
+_WRAP = ("import os, subprocess, sys, time\n"
+         "t0 = time.perf_counter(); p = subprocess.Popen(sys.argv[1:])\n"
+         "_, status, usage = os.wait4(p.pid, 0)\n"
+         "print(f'@peak {usage.ru_maxrss} {time.perf_counter() - t0}', file=sys.stderr)\n"
+         "sys.exit(os.waitstatus_to_exitcode(status))")
+
+
 def _measure(cmd: list, env: dict | None = None) -> tuple[float, float, str]:
     """Run ``cmd`` as a fresh process → (wall [s], peak RSS [MiB], stdout)."""
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=out, stderr=err, cwd=ROOT, env=env)
-        _, status, usage = os.wait4(proc.pid, 0)
-        wall = time.perf_counter() - t0
-        proc.returncode = os.waitstatus_to_exitcode(status)
+        proc = subprocess.run([sys.executable, "-c", _WRAP, *map(str, cmd)], stdout=out, stderr=err, cwd=ROOT,
+                              env=env)
         out.seek(0)
         err.seek(0)
         text, errors = out.read().decode(errors="replace"), err.read().decode(errors="replace")
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(map(str, cmd))} failed ({proc.returncode}):\n{errors[-2000:]}")
-    return wall, usage.ru_maxrss / 1024.0, text
+    _, kib, wall = errors.strip().splitlines()[-1].split()
+    return float(wall), float(kib) / 1024.0, text
 
 
 _READERS = {
