@@ -279,7 +279,7 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
         "quadratic in its parameters, so one pass of forward-mode JAX over the cells (each channel along "
         "only the parameters it depends on) gives an exact expansion, and each noise/outlier round "
         "compresses the weighted problem to a residual of "
-        f"{1 + len(ls.free) + len(ls.problem._expansion.pairs) if ls.problem._expansion else '—'} rows "
+        f"{1 + len(ls.free) + len(ls.problem.expansion.pairs) if ls.problem.expansion else '—'} rows "
         "(a Gram matrix, per channel over its few columns) on which optimistix Levenberg-Marquardt takes "
         f"{ls.steps} steps in about a millisecond. What is left grows with the samples: per-sample "
         "predictions for the residuals, per-run noise and the Hampel outlier test, two rounds and the final "

@@ -8,7 +8,7 @@ from motorid.errors import InputError
 
 
 def register(sub):
-    p = sub.add_parser("predict", help="torque, flows and efficiencies at operating points, with 95 % bands")
+    p = sub.add_parser("predict", help="torque, flows and efficiencies at operating points, with 95 %% bands")
     p.add_argument("result", help="folder written by motorid fit (its result.json)")
     p.add_argument("points", nargs="+", help="operating-point table(s): speed_rpm, p_a_bar/p_b_bar or dp_bar, ...")
     p.add_argument("--out", required=True, help="CSV to write")

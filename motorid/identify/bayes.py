@@ -51,7 +51,6 @@ autocorrelation times long and τ has settled, or until ``max_steps``.
 
 from __future__ import annotations
 
-import sys
 import time
 
 import emcee
@@ -236,30 +235,34 @@ def _start(ls: FitResult, log_prob, walkers: int, rng) -> np.ndarray:
     return z0
 
 
-def _run_chain(sampler, state, chunk: int, max_steps: int, min_tau_multiple: float, max_seconds, show: bool):
+def _run_chain(sampler, state, chunk: int, max_steps: int, min_tau_multiple: float, max_seconds,
+               show: bool | None):
     """Run in chunks until the chain is ``min_tau_multiple`` τ long and τ has settled →
-    (converged, τ per parameter, warnings, seconds)."""
+    (converged, τ per parameter, warnings, seconds).  ``show``: a progress bar
+    (:func:`motorid.progress.bar`; None: where stderr is a terminal and not quiet) whose
+    total is the steps the current τ asks for."""
+    from motorid.progress import bar
+
     t0 = time.time()
     tau_prev, converged, tau = None, False, np.full(sampler.ndim, np.nan)
     warnings = []
-    while sampler.iteration < max_steps:
-        state = sampler.run_mcmc(state, chunk, progress=False)
-        tau = sampler.get_autocorr_time(tol=0)
-        n = sampler.iteration
-        settled = tau_prev is not None and abs(np.max(tau) - np.max(tau_prev)) < 0.1 * np.max(tau)
-        if show:
-            print(f"\r  emcee: {n} steps × {sampler.nwalkers} walkers, τ_max {np.max(tau):.0f} "
-                  f"(need {min_tau_multiple:.0f}τ = {min_tau_multiple * np.max(tau):.0f} steps), "
-                  f"{time.time() - t0:.0f} s", end="", file=sys.stderr, flush=True)
-        if np.all(np.isfinite(tau)) and n >= min_tau_multiple * np.max(tau) and settled:
-            converged = True
-            break
-        tau_prev = tau
-        if max_seconds is not None and time.time() - t0 > max_seconds:
-            warnings.append(f"stopped after {max_seconds:.0f} s before reaching {min_tau_multiple:.0f} τ")
-            break
-    if show:
-        print(file=sys.stderr)
+    with bar(total=max_steps, desc="emcee", unit="step", progress=show) as pbar:
+        while sampler.iteration < max_steps:
+            state = sampler.run_mcmc(state, chunk, progress=False)
+            tau = sampler.get_autocorr_time(tol=0)
+            n = sampler.iteration
+            settled = tau_prev is not None and abs(np.max(tau) - np.max(tau_prev)) < 0.1 * np.max(tau)
+            if np.all(np.isfinite(tau)):
+                pbar.total = int(min(max(min_tau_multiple * np.max(tau), n + chunk), max_steps))
+            pbar.set_postfix_str(f"{sampler.nwalkers} walkers, τ_max {np.max(tau):.0f}", refresh=False)
+            pbar.update(n - pbar.n)
+            if np.all(np.isfinite(tau)) and n >= min_tau_multiple * np.max(tau) and settled:
+                converged = True
+                break
+            tau_prev = tau
+            if max_seconds is not None and time.time() - t0 > max_seconds:
+                warnings.append(f"stopped after {max_seconds:.0f} s before reaching {min_tau_multiple:.0f} τ")
+                break
     if not converged and not warnings:
         warnings.append(f"stopped at max_steps={max_steps} before reaching {min_tau_multiple:.0f} τ")
     return converged, tau, warnings, t0
@@ -319,8 +322,7 @@ def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
     moves = [(emcee.moves.DEMove(), 1.0)]
     sampler = emcee.EnsembleSampler(walkers, ndim, target, vectorize=True, moves=moves)
     sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
-    show = sys.stderr.isatty() if progress is None else progress
-    converged, tau, warnings, t0 = _run_chain(sampler, z0, chunk, max_steps, min_tau_multiple, max_seconds, show)
+    converged, tau, warnings, t0 = _run_chain(sampler, z0, chunk, max_steps, min_tau_multiple, max_seconds, progress)
     tau_max = float(np.max(tau)) if np.all(np.isfinite(tau)) else float(sampler.iteration)
     burn = int(min(max(3 * tau_max, 1), sampler.iteration // 2))
     thin = max(int(tau_max / 2), 1)

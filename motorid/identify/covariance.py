@@ -163,16 +163,19 @@ def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):
     # cells are numbered in run order: run r's cells are bounds[r]:bounds[r + 1]
     bounds = np.searchsorted(problem.cell_run, np.arange(n_runs + 1))
     smoothed = np.flatnonzero(np.any(verr.factor[:n_runs] != 0.0, axis=(1, 2)) & (np.diff(bounds) > 0))
-    # cell means of the Chebyshev basis (one column at a time: no (samples × K) array), then the modes
-    u = (np.asarray(problem.data.running.time, dtype=float) - verr.center[problem.run_of]) / verr.half_span[problem.run_of]
-    cell_basis = np.empty((n_cells, K))
-    prev, cur = np.ones_like(u), u
-    for k in range(K):
-        col = prev if k == 0 else cur
-        cell_basis[:, k] = np.bincount(problem.cell_of, weights=col, minlength=n_cells) / counts
-        if k >= 1:
-            prev, cur = cur, 2.0 * u * cur - prev
-    del u, prev, cur
+    # cell means of the Chebyshev basis (one column at a time: no (samples × K) array), then the modes;
+    # data reduced to cells as read bring their own (a cell's mean time is not enough)
+    cell_basis = getattr(problem, "viscosity_basis", None)
+    if cell_basis is None:
+        u = (np.asarray(problem.data.running.time, dtype=float) - verr.center[problem.run_of]) / verr.half_span[problem.run_of]
+        cell_basis = np.empty((n_cells, K))
+        prev, cur = np.ones_like(u), u
+        for k in range(K):
+            col = prev if k == 0 else cur
+            cell_basis[:, k] = np.bincount(problem.cell_of, weights=col, minlength=n_cells) / counts
+            if k >= 1:
+                prev, cur = cur, 2.0 * u * cur - prev
+        del u, prev, cur
     cell_modes = np.zeros((n_cells, K))
     for r in smoothed:
         cell_modes[bounds[r]:bounds[r + 1]] = cell_basis[bounds[r]:bounds[r + 1]] @ verr.factor[r]

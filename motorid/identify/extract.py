@@ -101,6 +101,16 @@ class _Gathered:
         self.visc_center, self.visc_half = np.zeros(self.n_runs), np.ones(self.n_runs)
         self.visc_factor = np.zeros((self.n_runs, VISCOSITY_MODES, VISCOSITY_MODES))
 
+    def grow(self, r: int) -> None:
+        """Room for run ``r`` (runs that arrive one by one: their number is not known beforehand)."""
+        if r >= self.n_runs:
+            more = max(r + 1 - self.n_runs, self.n_runs, 16)
+            self.visc_center = np.r_[self.visc_center, np.zeros(more)]
+            self.visc_half = np.r_[self.visc_half, np.ones(more)]
+            self.visc_factor = np.concatenate([self.visc_factor,
+                                               np.zeros((more, VISCOSITY_MODES, VISCOSITY_MODES))])
+            self.n_runs += more
+
 
 def _add_startability(g: _Gathered, r: int, key, cols, row: dict, settings) -> None:
     event, why = startability_event(key, cols, settings, g.excluded, g.notes)
@@ -113,9 +123,11 @@ def _add_startability(g: _Gathered, r: int, key, cols, row: dict, settings) -> N
             g.pending.append((event, cols))
 
 
-def _add_running(g: _Gathered, r: int, key, pos, cols, row: dict, settings):
+def _add_running(g: _Gathered, r: int, key, pos, cols, row: dict, settings, cells=None):
     """The steady samples of a running run, their acceleration and smoothed viscosity → the
-    positions used for the run's medians (every sample where none is steady)."""
+    positions used for the run's medians (every sample where none is steady).  With
+    ``cells`` (:class:`motorid.identify.cells.CellReducer`) the run's steady samples are
+    reduced to its shaft-angle cells at once instead of kept."""
     chosen, direction, why = steady_run(key, cols, settings, g.excluded, g.notes)
     row.update(direction=direction, excluded=why)
     if chosen is None:
@@ -125,18 +137,21 @@ def _add_running(g: _Gathered, r: int, key, pos, cols, row: dict, settings):
     acc = running_acceleration(cols["time_s"], cols["speed_rad_s"], cols["theta_rad"], steady,
                                settings.accel_window, settings.shaft_orders)
     _note_in_step(g.notes, key, cols["time_s"][chosen], cols["speed_rad_s"][chosen], settings.shaft_orders)
-    g.picks.append(pos[chosen])
-    g.accel.append(acc[chosen])
     mu = cols["viscosity_Pa_s"][chosen]
     if settings.smooth_viscosity:
         mu, degree, noise, factor, g.visc_center[r], g.visc_half[r] = smooth_viscosity(
             cols["time_s"][chosen], mu, settings.viscosity_max_degree)
         g.visc_factor[r] = factor
         row.update(viscosity_degree=degree, viscosity_noise_Pa_s=noise)
+    row["n_steady"] = int(chosen.size)
+    if cells is not None:
+        cells.add_run(r, cols, chosen, acc[chosen], mu, direction, g.visc_center[r], g.visc_half[r])
+        return chosen
+    g.picks.append(pos[chosen])
+    g.accel.append(acc[chosen])
     g.visc.append(mu)
     g.run_of_sample.append(np.full(chosen.size, r))
     g.directions.append(np.full(chosen.size, direction))
-    row["n_steady"] = int(chosen.size)
     return chosen
 
 
@@ -197,31 +212,75 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
     g = _Gathered(len(index.keys))
     for r, key in enumerate(index.keys):
         pos, cols, protocol, file = index.run(r)
-        row = {"run": key, "protocol": protocol, "file": file, "n_samples": pos.size, "n_steady": 0,
-               "direction": 0.0, "onset_time_s": math.nan, "excluded": "", "viscosity_degree": -1,
-               "viscosity_noise_Pa_s": math.nan}
-        used = np.arange(pos.size)
-        if protocol == STARTABILITY:
-            _add_startability(g, r, key, cols, row, settings)
-        elif protocol in RUNNING_PROTOCOLS:
-            used = _add_running(g, r, key, pos, cols, row, settings)
-        else:
-            raise InputError(f"run {key}: unknown protocol '{protocol}'")
-        p_a, p_b = cols["p_a_Pa"][used], cols["p_b_Pa"][used]
-        row.update(speed_median_rad_s=nanmedian(cols["speed_rad_s"][used]), dp_median_Pa=nanmedian(p_a - p_b),
-                   psum_median_Pa=nanmedian(p_a + p_b), temp_median_C=nanmedian(cols["oil_temp_C"][used]))
-        g.rows.append(row)
+        _extract_run(g, r, key, pos, cols, protocol, file, settings)
+    return _finish(spec, g, lambda runs: _running_samples(spec, index.numeric, g, runs))
 
+
+def _extract_run(g: _Gathered, r: int, key, pos, cols, protocol, file, settings, cells=None) -> None:
+    """One run → its row of ``Dataset.runs``, and its steady samples or breakaway event into ``g``."""
+    row = {"run": key, "protocol": protocol, "file": file, "n_samples": pos.size, "n_steady": 0,
+           "direction": 0.0, "onset_time_s": math.nan, "excluded": "", "viscosity_degree": -1,
+           "viscosity_noise_Pa_s": math.nan}
+    used = np.arange(pos.size)
+    if protocol == STARTABILITY:
+        _add_startability(g, r, key, cols, row, settings)
+    elif protocol in RUNNING_PROTOCOLS:
+        used = _add_running(g, r, key, pos, cols, row, settings, cells)
+    else:
+        raise InputError(f"run {key}: unknown protocol '{protocol}'")
+    p_a, p_b = cols["p_a_Pa"][used], cols["p_b_Pa"][used]
+    row.update(speed_median_rad_s=nanmedian(cols["speed_rad_s"][used]), dp_median_Pa=nanmedian(p_a - p_b),
+               psum_median_Pa=nanmedian(p_a + p_b), temp_median_C=nanmedian(cols["oil_temp_C"][used]))
+    g.rows.append(row)
+
+
+def _finish(spec, g: _Gathered, running_samples, cells=None) -> Dataset:
+    """The gathered runs → :class:`Dataset` (``running_samples(runs)`` gives its running part)."""
     place_limited_onsets(g.events, g.pending)
     for e in g.events:
         g.rows[e["run_index"]]["onset_time_s"] = e["onset"]
     runs = pd.DataFrame(g.rows, columns=RUN_COLUMNS)
-    running, measured, rows, run_of_sample = _running_samples(spec, index.numeric, g, runs)
+    n = len(g.rows)
+    center, half, factor = g.visc_center[:n], g.visc_half[:n], g.visc_factor[:n]
+    running, measured, rows, run_of_sample = running_samples(runs)
     events, ev = _event_samples(spec, g.events)
     return Dataset(
         running=running, measured=measured, run_of_sample=run_of_sample, frame_index=rows, runs=runs,
         events=events, held_torque=ev("held"), event_runs=[e["run"] for e in g.events],
         run_of_event=np.array([e["run_index"] for e in g.events], dtype=int), onset_time=ev("onset"),
         excluded={k: v for k, v in g.excluded.items() if v}, notes=g.notes,
-        viscosity_error=(ViscositySmoothing(g.visc_center, g.visc_half, g.visc_factor)
-                         if np.any(g.visc_factor) else None))
+        viscosity_error=(ViscositySmoothing(center, half, factor) if np.any(factor) else None),
+        cells=None if cells is None else cells.statistics(len(runs)))
+
+
+def extract_cells(runs, spec: MotorSpec, settings: ExtractSettings | None = None, bins_per_pitch: int = 192,
+                  outlier_sigma: float = 5.0, progress: bool | None = None) -> Dataset:
+    """Steady-state running samples reduced to shaft-angle cells run by run, and breakaway events.
+
+    runs : an iterable of :class:`motorid.io.stream.RunColumns` (a campaign read as a
+    stream); each running run's steady samples go into cell sums as the run arrives
+    (:class:`motorid.identify.cells.CellReducer`), so that memory is set by the cells,
+    not the rows.  Returns a :class:`Dataset` whose running rows are cells, with their
+    sufficient statistics in ``Dataset.cells``.
+    """
+    from motorid.identify.cells import CellReducer, give_back_free_memory
+    from motorid.progress import bar
+
+    settings = settings or ExtractSettings()
+    _check_spec(spec)
+    g = _Gathered(0)
+    cells = CellReducer(spec, bins_per_pitch, outlier_sigma)
+    with bar(desc="extracting", unit="run", progress=progress) as pbar:
+        for r, run in enumerate(runs):
+            g.grow(r)
+            cells.rows += run.n
+            _extract_run(g, r, run.key, np.arange(run.n), run.columns, run.protocol, run.file, settings, cells)
+            pbar.update(1)
+            if run.n > 50_000:
+                del run
+                give_back_free_memory()
+    if not g.rows:
+        raise InputError("no runs in these logs")
+    data = _finish(spec, g, cells.running_samples, cells)
+    give_back_free_memory()
+    return data

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass
 from typing import Sequence
@@ -20,12 +21,54 @@ class Identification:
     priors: dict
 
 
-def load_campaign(paths: Sequence, spec, channels=None):
-    """Read and validate the logs, then extract steady samples and breakaway events."""
-    from motorid.identify.extract import extract
+#: above about this many rows a campaign is reduced to cells as it is read (docs/large-logs.md)
+CELL_ROWS = 500_000
+
+
+def cell_rows() -> int:
+    """The row count above which :func:`identify` reduces a campaign to cells as it reads it:
+    ``MOTORID_CELL_ROWS`` where set, else :data:`CELL_ROWS`."""
+    value = os.environ.get("MOTORID_CELL_ROWS", "").strip()
+    if value:
+        from motorid.errors import InputError
+
+        try:
+            return int(float(value))
+        except ValueError:
+            raise InputError(f"MOTORID_CELL_ROWS must be a number of rows, got '{value}'") from None
+    return CELL_ROWS
+
+
+def load_campaign(paths: Sequence, spec, channels=None, *, cells: bool | None = False,
+                  bins_per_pitch: int = 192, outlier_sigma: float = 5.0, progress: bool | None = None):
+    """Read and validate the logs, then extract steady samples and breakaway events → (frame, Dataset).
+
+    cells : False keeps every steady sample (the frame is read whole); True streams
+    the logs and reduces each run to shaft-angle cells as it arrives
+    (:func:`motorid.identify.extract.extract_cells`; the frame is then None); None
+    decides by the rows: cells above :func:`cell_rows` (estimated from the file
+    sizes, :func:`motorid.io.stream.estimate_rows`).  bins_per_pitch and
+    outlier_sigma : the cells and the spike test of that reduction.
+    """
+    from motorid.identify.extract import extract, extract_cells
     from motorid.io.logs import read_logs
 
-    frame = read_logs([str(p) for p in paths], spec, channels)
+    paths = [str(p) for p in paths]
+    if cells is None:
+        from motorid.io.stream import estimate_rows
+
+        cells = estimate_rows(paths) > cell_rows()
+    if cells:
+        from motorid.io.stream import StreamFallback, runs_of_frame, stream_runs
+
+        reduce = lambda runs: extract_cells(runs, spec, bins_per_pitch=bins_per_pitch,  # noqa: E731
+                                            outlier_sigma=outlier_sigma, progress=progress)
+        try:
+            return None, reduce(stream_runs(paths, spec, channels, progress=progress))
+        except StreamFallback:  # interleaved runs or a cell to name: read whole (docs/large-logs.md)
+            frame = read_logs(paths, spec, channels)
+            return None, reduce(runs_of_frame(frame))
+    frame = read_logs(paths, spec, channels)
     return frame, extract(frame, spec)
 
 
@@ -35,9 +78,12 @@ def viscosity_model_warning(frame, dataset, ls) -> str:
     standard errors do not hold the oil model's own error ("" where it did not)."""
     from motorid.io.logs import VISCOSITY_FROM_OIL
 
-    if frame is None or VISCOSITY_FROM_OIL not in frame.columns or not dataset.n_running:
+    if getattr(dataset, "cells", None) is not None and dataset.n_running:
+        share = dataset.cells.viscosity_from_oil / max(float(dataset.cells.n.sum()), 1.0)
+    elif frame is None or VISCOSITY_FROM_OIL not in frame.columns or not dataset.n_running:
         return ""
-    share = float(frame[VISCOSITY_FROM_OIL].to_numpy()[dataset.frame_index].mean())
+    else:
+        share = float(frame[VISCOSITY_FROM_OIL].to_numpy()[dataset.frame_index].mean())
     affected = [k for k in ("Kv", "KL0", "KAB") if ls.identifiable.get(k)]
     if share <= 0 or not affected:
         return ""
@@ -51,11 +97,20 @@ def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | N
              mechanisms: Sequence = (), seed: int = 0, progress: bool | None = None,
              dataset=None, frame=None, channels=None) -> Identification:
     """The main job: a least-squares fit of every parameter the logs identify, and
-    with ``bayes`` an emcee posterior started from it."""
+    with ``bayes`` an emcee posterior started from it.  A campaign of more than
+    :func:`cell_rows` rows is reduced to cells as it is read (:func:`load_campaign`)
+    and fitted from them (:func:`motorid.identify.cell_fit.fit_cells`)."""
     t0 = time.time()
+    opt = options or FitOptions()
     if dataset is None:
-        frame, dataset = load_campaign(paths, spec, channels)
-    ls = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=options)
+        frame, dataset = load_campaign(paths, spec, channels, cells=None, bins_per_pitch=opt.bins_per_pitch,
+                                       outlier_sigma=opt.outlier_sigma, progress=progress)
+    if getattr(dataset, "cells", None) is not None:
+        from motorid.identify.cell_fit import fit_cells
+
+        ls = fit_cells(dataset, spec, mechanisms=mechanisms, options=options)
+    else:
+        ls = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=options)
     note = viscosity_model_warning(frame, dataset, ls)
     if note:
         ls.warnings.append(note)

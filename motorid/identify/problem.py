@@ -126,6 +126,10 @@ class Problem:
     model; the parameter-free S(θ) is averaged exactly, and the viscosity as its
     harmonic mean (the leakage goes as 1/μ).  The fit then costs the same for
     10 k or 3 M rows of the same runs.
+
+    A dataset already reduced to cells as it was read (``data.cells``, see
+    :mod:`motorid.identify.cells`) has one row per cell: each row then counts with
+    its number of samples (``cells.n`` for the inputs, ``cells.counts`` per channel).
     """
 
     def __init__(self, data, spec, free, held, mechanisms, bins_per_pitch=48):
@@ -137,6 +141,12 @@ class Problem:
         self.held_torque = np.asarray(data.held_torque, dtype=float) if self.has_events else np.zeros(0)
         self.run_of = np.asarray(data.run_of_sample, dtype=int) if self.has_running else np.zeros(0, int)
         self.n_samples, self.n_cells = 0, 0
+        stats = getattr(data, "cells", None) if self.has_running else None
+        # samples behind each row: None where each row is one sample
+        self.row_n = None if stats is None else np.asarray(stats.n, dtype=float)
+        self.row_counts = None if stats is None else {c: np.asarray(stats.counts[c], dtype=float)
+                                                      for c in RUNNING_CHANNELS}
+        self.viscosity_basis = None  # cell means of the viscosity curve's Chebyshev basis (reduced data)
         if self.has_running:
             bins = bins_per_pitch * spec.pistons
             theta = np.mod(np.asarray(data.running.theta), 2 * np.pi)
@@ -147,6 +157,12 @@ class Problem:
             self.cell_of = (np.cumsum(occupied) - 1)[key]
             self.n_cells = int(occupied.sum())
             counts = np.bincount(self.cell_of, minlength=self.n_cells).astype(float)
+            weigh = (lambda x: x) if self.row_n is None else (lambda x: x * self.row_n)  # noqa: E731
+            if self.row_n is not None:
+                counts = np.bincount(self.cell_of, weights=self.row_n, minlength=self.n_cells)
+                self.viscosity_basis = np.stack([
+                    np.bincount(self.cell_of, weights=weigh(col), minlength=self.n_cells) / counts
+                    for col in np.asarray(stats.viscosity_basis, dtype=float).T], axis=1)
             self.cell_run = np.zeros(self.n_cells, int)
             self.cell_run[self.cell_of] = self.run_of
             self.cell_size = bucket(self.n_cells)
@@ -154,7 +170,7 @@ class Problem:
             # samples of one bin from different revolutions average to that bin
             fields = data.running._replace(theta=theta)
             means = Samples(*[
-                np.bincount(self.cell_of, weights=np.asarray(f, dtype=float), minlength=self.n_cells) / counts
+                np.bincount(self.cell_of, weights=weigh(np.asarray(f, dtype=float)), minlength=self.n_cells) / counts
                 for f in fields
             ])
             # the leakage flows go as 1/μ: the cell's viscosity is the harmonic mean of its
@@ -164,7 +180,7 @@ class Problem:
             # torque, ∝ μ, then sees the harmonic mean: off by the same var(μ)/μ² of its size,
             # a thousandth of K_v's standard error there
             with np.errstate(divide="ignore", invalid="ignore"):
-                inv = np.bincount(self.cell_of, weights=1.0 / np.asarray(data.running.viscosity, dtype=float),
+                inv = np.bincount(self.cell_of, weights=weigh(1.0 / np.asarray(data.running.viscosity, dtype=float)),
                                   minlength=self.n_cells) / counts
                 means = means._replace(viscosity=np.where(inv > 0, 1.0 / inv, means.viscosity))
             self.cell_samples = pad_samples(means, self.cell_size)
@@ -196,8 +212,13 @@ class Problem:
         for c in RUNNING_CHANNELS if self.has_running else ():
             ok = inliers[c]
             y = np.where(ok, self.measured[c], 0.0)
-            cnt = np.bincount(self.cell_of, weights=ok.astype(float), minlength=self.n_cells)
-            tot = np.bincount(self.cell_of, weights=y, minlength=self.n_cells)
+            if self.row_counts is None:
+                cnt = np.bincount(self.cell_of, weights=ok.astype(float), minlength=self.n_cells)
+                tot = np.bincount(self.cell_of, weights=y, minlength=self.n_cells)
+            else:  # rows that are cells: each counts with its inlier samples
+                k = np.where(ok, self.row_counts[c], 0.0)
+                cnt = np.bincount(self.cell_of, weights=k, minlength=self.n_cells)
+                tot = np.bincount(self.cell_of, weights=y * k, minlength=self.n_cells)
             obs[c] = pad(np.where(cnt > 0, tot / np.maximum(cnt, 1), 0.0), self.cell_size)
             w[c] = pad(np.sqrt(cnt) / sigma_runs[c][self.cell_run], self.cell_size)
         if self.has_events:

@@ -108,6 +108,11 @@ class Dataset:
     notes : one line per run that gave less than it might, in words
     viscosity_error : the error the smoothed viscosity of each run still carries
         (:class:`ViscositySmoothing`), or None where every reading is used as read
+    cells : None where each running row is one sample; for a campaign reduced as it
+        was read (:func:`motorid.identify.extract.extract_cells`) each running row is
+        one shaft-angle cell of one run (its inputs the cell means, viscosity their
+        harmonic mean, its measured channels the means of their inliers) and
+        :class:`CellStatistics` holds its counts, scatter and the noise levels
     """
 
     running: Samples
@@ -123,6 +128,7 @@ class Dataset:
     excluded: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     viscosity_error: "ViscositySmoothing | None" = None
+    cells: "CellStatistics | None" = None
 
     @property
     def n_running(self) -> int:
@@ -134,6 +140,31 @@ class Dataset:
 
 
 VISCOSITY_MODES = 6  # columns of ViscositySmoothing.factor: degree 5 at most
+
+
+@dataclass
+class CellStatistics:
+    """Sufficient statistics of the running rows of a :class:`Dataset` reduced to cells.
+
+    n : steady samples in each row (cell) [-]; counts : channel → the inlier samples
+    of that channel in the row [-] (spikes and missing readings left out); within :
+    channel → Σ (x − row mean)² over those samples [SI²]; noise : channel → σ of one
+    sample per run, estimated model-free when the run was reduced (within-cell scatter
+    and first differences, the smaller) and held by the fit [SI]; viscosity_basis :
+    (rows, VISCOSITY_MODES) the row means of the Chebyshev basis Tₖ(u) of the run's
+    viscosity curve (:class:`ViscositySmoothing`) [-]; outliers : channel → samples
+    left out as spikes [-]; rows : rows read [-]; viscosity_from_oil : steady samples
+    whose viscosity came from the oil model, not a viscometer [-].
+    """
+
+    n: np.ndarray
+    counts: dict
+    within: dict
+    noise: dict
+    viscosity_basis: np.ndarray
+    outliers: dict
+    rows: int = 0
+    viscosity_from_oil: int = 0
 
 
 @dataclass(frozen=True)
