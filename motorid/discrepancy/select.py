@@ -119,7 +119,8 @@ def _wandering_zeros(base: FitResult, dataset) -> dict:
     """Running channels whose transducer zero seems to change from run to run (a spread of the
     run means that twin runs at one operating point do not share: :func:`run_spread`) →
     {channel: its run_spread}.  A mechanism acting on such a channel is not named: run-level
-    structure there may be the zeros, and a wrong name is worse than none."""
+    structure there may be the zeros, and a wrong name is worse than none.  Asked only where the
+    mass balance has shown wandering zeros (:func:`_zeros_shown_to_wander`)."""
     from motorid.discrepancy.run_offsets import run_spread
 
     out = {}
@@ -133,6 +134,19 @@ def _wandering_zeros(base: FitResult, dataset) -> dict:
         if spread.get("offset_like"):
             out[c] = spread
     return out
+
+
+def _zeros_shown_to_wander(dataset) -> bool:
+    """Whether the model-free mass balance of the flow meters shows zeros that change from run to
+    run (:func:`~motorid.physics.mass_balance.flow_zeros_wander`): only then is the twin-run test of
+    :func:`_wandering_zeros` trusted (alone it mistakes physics with odd and even parts in ω for
+    wandering zeros)."""
+    from motorid.physics.mass_balance import flow_zeros_wander
+
+    try:
+        return bool(flow_zeros_wander(dataset))
+    except Exception:  # noqa: BLE001 - no flow meters, too few runs: no evidence
+        return False
 
 
 def _screen_candidates(screen, catalog, current_mechs, current, channels, dataset, n_res, say,
@@ -199,7 +213,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     lap("base fit")
     noise, inliers = _fixed(base)
     loc0 = locate(base, dataset, spec, alpha=alpha, min_effect=min_effect)
-    wandering = _wandering_zeros(base, dataset) if loc0.significant else {}
+    wandering = _wandering_zeros(base, dataset) if loc0.significant and _zeros_shown_to_wander(dataset) else {}
     for c, spread in wandering.items():
         say(f"{c}: the transducer zero seems to change from run to run; nothing is named on it")
         refused.append({"id": f"any mechanism on {c}", "why": "per-run zero offsets: run means spread "
