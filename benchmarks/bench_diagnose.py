@@ -123,7 +123,8 @@ def run(quick: bool = False) -> str:
             base_named = json.loads((tmp / "base.json").read_text())["mechanisms"]
         os.environ["MOTORID_CACHE_DIR"] = env["MOTORID_CACHE_DIR"]
         steps, _ = _steps(log, motor)
-        verdicts = [] if quick else _verdicts(py, env, tmp)
+        # BENCH_DIAGNOSE_VERDICTS=0 skips the concealed campaigns (minutes)
+        verdicts = [] if quick or os.environ.get("BENCH_DIAGNOSE_VERDICTS") == "0" else _verdicts(py, env, tmp)
 
     fit_w, fit_m = min(f[0] for f in fit[1:]), max(f[1] for f in fit[1:])
     dg_w, dg_m = min(d[0] for d in dg[1:]), max(d[1] for d in dg[1:])
