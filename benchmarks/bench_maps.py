@@ -9,7 +9,9 @@ fitted and asked to predict points it did not see:
 
 - motorid: the base model (θ-averaged, identify/tables.py);
 - motorid + diagnose: the model with the mechanisms that `motorid diagnose`
-  selects on the whole table (forward selection by BIC, discrepancy/tables.py);
+  selects on the whole table (forward selection by BIC, discrepancy/tables.py)
+  and, where diagnose leaves a channel unexplained with an empirical term, that
+  term searched again on each fold's training points (discrepancy/table_terms.py);
 - Wilson, Schlösser, McCandlish–Dorey, Jeong, polynomial map (motorid/comparators/).
 
 Errors (motorid/comparators/evaluate.py): 5-fold held-out RMS, and the RMS when
@@ -136,10 +138,14 @@ def _evaluate(name, table, spec, diagnose: bool, groups=None):
     rows = {"motorid": held_out(MotoridModel(spec), table, groups=groups)}
     found = []
     if diagnose:
+        from motorid.discrepancy.table_terms import MotoridWithTerms
+
         dg = diagnose_table(table, spec)
-        found = [m.id for m in dg["mechanisms"]]
-        if found:
-            rows["motorid + diagnose"] = held_out(MotoridModel(spec, dg["mechanisms"]), table, groups=groups)
+        found = [m.id for m in dg["mechanisms"]] + [f"empirical term ({u['channel']})" for u in dg["unexplained"]]
+        if found:  # an empirical term is chosen again on each fold's training points alone
+            model = (MotoridWithTerms(spec, dg["mechanisms"], groups=groups) if dg["unexplained"]
+                     else MotoridModel(spec, dg["mechanisms"]))
+            rows["motorid + diagnose"] = held_out(model, table, groups=groups)
     for m in all_comparators():
         rows[m.name] = held_out(m, table, groups=groups)
     return {"name": name, "rows": rows, "found": found, "seconds": time.time() - t0, "points": len(table),

@@ -151,12 +151,13 @@ class _FittedMotorid:
         return out
 
 
-def compare(table, spec, comparators=None, mechanisms=(), k: int = 5) -> dict:
-    """The ``comparison`` block: held-out errors of motorid and of every comparator on ``table``."""
+def compare(table, spec, comparators=None, mechanisms=(), k: int = 5, motorid_model=None) -> dict:
+    """The ``comparison`` block: held-out errors of motorid and of every comparator on ``table``
+    (``motorid_model``: motorid's row, where not the one model plus ``mechanisms``)."""
     from motorid.comparators import all_comparators
 
-    models = [MotoridModel(spec, mechanisms, label="motorid" + (" + " + "+".join(m.id for m in mechanisms)
-                                                                if mechanisms else ""))]
+    models = [motorid_model or MotoridModel(spec, mechanisms, label="motorid" + (
+        " + " + "+".join(m.id for m in mechanisms) if mechanisms else ""))]
     models += list(comparators if comparators is not None else all_comparators())
     out = {"method": {"kfold": f"{k}-fold, seeded permutation (seed 0)",
                       "extrapolation": f"fit on |ΔP| (or |ω|) up to its {int(EXTRAPOLATION_QUANTILE * 100)}th "

@@ -111,15 +111,17 @@ class Term:
         return v
 
 
-def library(pistons: int) -> list[Term]:
-    """Every candidate term (see module doc), without the constant."""
+def library(pistons: int, harmonics: bool = True, viscosity: bool = True) -> list[Term]:
+    """Every candidate term (see module doc), without the constant; ``harmonics=False`` leaves
+    out the shaft-order harmonics (θ-averaged operating points have no shaft angle),
+    ``viscosity=False`` the μ factors (data at one viscosity: μ·t and t/μ are t rescaled)."""
     terms = []
     for a in _speed_factors():
         for b in _pressure_factors():
-            for c in _viscosity_factors():
+            for c in _viscosity_factors() if viscosity else _viscosity_factors()[:1]:
                 if a.text or b.text or c.text:
                     terms.append(Term((a, b, c)))
-    for h in _harmonic_factors(pistons):
+    for h in _harmonic_factors(pistons) if harmonics else ():
         terms.append(Term((h,)))
         terms.append(Term((h, _pressure_factors()[1])))
     return terms
@@ -236,13 +238,16 @@ def _design(channel, x, spec, terms):
     return N, L
 
 
-def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regions: dict | None = None):
+def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regions: dict | None = None,
+            harmonics: bool = True):
     """The sparsest library term that explains ``residual`` on held-out runs, or None.
 
     x : Samples (numpy) of the channel's inlier samples; residual, sigma [SI]; run_of : run index per sample.
     regions : name → boolean mask (True: first part) for the where-not-fitted check.
     """
-    terms = library(spec.pistons)
+    mu = np.asarray(x.viscosity, float)
+    varies = bool(np.nanmax(mu) - np.nanmin(mu) > 1e-3 * np.nanmean(mu))
+    terms = library(spec.pistons, harmonics, viscosity=varies)
     N, L = _design(channel, x, spec, terms)
     w = 1.0 / np.asarray(sigma, float)
     y = np.asarray(residual, float) * w

@@ -76,8 +76,16 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             break
         current.append(mech)
         bic, best_fit = b, tf
-    comparison = compare(table, spec, mechanisms=current) if len(table) >= 10 else None
-    return {"mechanisms": current, "fit": best_fit, "base_fit": base_fit, "steps": steps, "comparison": comparison}
+    from motorid.discrepancy.table_terms import MotoridWithTerms, unexplained_table_entries
+
+    unexplained = unexplained_table_entries(best_fit, spec) if dataset is None else []
+    model = None
+    if unexplained:  # held out, the empirical term is chosen again on each fold's training points alone
+        model = MotoridWithTerms(spec, current, label="motorid" + "".join(" + " + m.id for m in current)
+                                 + " + empirical term")
+    comparison = compare(table, spec, mechanisms=current, motorid_model=model) if len(table) >= 10 else None
+    return {"mechanisms": current, "fit": best_fit, "base_fit": base_fit, "steps": steps, "comparison": comparison,
+            "unexplained": unexplained}
 
 
 def diagnosis_table_document(dg: dict, spec) -> dict:
@@ -98,7 +106,8 @@ def diagnosis_table_document(dg: dict, spec) -> dict:
         if np.isfinite(r0).any():
             chans[c] = {"residual_rms_before": float(np.sqrt(np.nanmean(r0**2))),
                         "residual_rms_after": float(np.sqrt(np.nanmean(r1**2)))}
-    return _clean({"source": "operating-point tables", "mismatch": bool(dg["mechanisms"]), "mechanisms": mechs,
+    return _clean({"source": "operating-point tables", "mismatch": bool(dg["mechanisms"] or dg.get("unexplained")),
+                   "mechanisms": mechs, "unexplained": dg.get("unexplained", []),
                    "selection": {"criterion": "BIC with each channel's noise level profiled out", "steps": dg["steps"]},
                    "channels": chans, "comparison": dg["comparison"],
                    "parameters": {k: {"value": fit.ls.values[k], "std": fit.ls.std[k],

@@ -1,0 +1,192 @@
+"""Empirical terms on operating-point tables: what the catalog leaves, as a checked formula.
+
+On a table (one row per steady point, θ-averaged, no shaft angle) the structure
+that no catalog mechanism explains is searched with the library of
+:mod:`motorid.discrepancy.empirical` (shaft-order harmonics left out), K-fold over
+the points (or over the recordings where the table names them).  A proposed
+term is kept only if it also predicts where it was not fitted: fitted on the
+lower half of the speeds it must improve the upper half and the other way round,
+and the same over |ΔP|.  A term that helps only inside the cloud of points it
+was fitted on (a polynomial that bends away outside it) is not kept.
+
+:class:`MotoridWithTerms` is the held-out comparator that uses it: motorid's one
+model (plus the catalog mechanisms diagnose selected) fitted on the training
+points, then on each channel the empirical term selected and checked on those
+training points alone, its coefficients and the base model's own linear shapes
+refitted to the training residuals.  Nothing about the held-out points enters
+the choice.
+"""
+
+from __future__ import annotations
+
+import types
+
+import numpy as np
+
+from motorid.comparators.evaluate import CHANNELS, MotoridModel
+from motorid.discrepancy.empirical import EmpiricalTerm, nuisance, propose
+
+#: folds over the training points (or their recordings) of the term search
+FOLDS = 5
+#: a channel needs this many points for a term search (5 folds of at least 4 points)
+MIN_POINTS = 20
+#: a table term must remove at least this fraction of the held-out χ² (on clean simulated maps
+#: a spurious term removes up to about 5 %: benchmarks bench_mapphysics, tests/test_table_terms.py)
+MIN_GAIN = 0.10
+
+
+def point_samples(table, index=None):
+    """The table's operating points as the sample fields the term library reads (SI)."""
+    idx = slice(None) if index is None else index
+    speed = np.asarray(table.speed, float)[idx]
+    return types.SimpleNamespace(speed=speed, direction=np.sign(speed), p_a=np.asarray(table.p_a, float)[idx],
+                                 p_b=np.asarray(table.p_b, float)[idx],
+                                 p_case=np.asarray(table.p_case, float)[idx],
+                                 viscosity=np.asarray(table.viscosity, float)[idx])
+
+
+def _regions(x) -> dict:
+    """Halves of the points (True: the lower half) along |ω| and |ΔP|."""
+    w, dp = np.abs(x.speed), np.abs(x.p_a - x.p_b)
+    return {("low speeds", "high speeds"): w <= np.median(w),
+            ("low |ΔP|", "high |ΔP|"): dp <= np.median(dp)}
+
+
+def _solve(A, y):
+    scale = np.sqrt(np.mean(A**2, axis=0))  # columns span 1 … 1e14 in SI: scaled, or lstsq drops some
+    scale[scale == 0] = 1.0
+    return np.linalg.lstsq(A / scale, y, rcond=None)[0] / scale
+
+
+def _sse(A, y, fit, test) -> float:
+    return float(np.sum((y[test] - A[test] @ _solve(A[fit], y[fit])) ** 2))
+
+
+def _checked(channel, x, y, w, fold, terms, spec):
+    """(held-out gain K-fold, where-not-fitted gains, coefficients) of ``terms`` on top of the
+    base model's own shapes (weighted: y, columns × w)."""
+    N = nuisance(channel, x, spec) * w[:, None]
+    A = np.column_stack([N] + [t.values(x) * w for t, _ in terms])
+    base = sum(_sse(N, y, fold != f, fold == f) for f in np.unique(fold))
+    cv = sum(_sse(A, y, fold != f, fold == f) for f in np.unique(fold))
+    regions = {}
+    for (lo, hi), low in _regions(x).items():
+        for fit, label in ((low, f"fit on {lo}, predict {hi}"), (~low, f"fit on {hi}, predict {lo}")):
+            if fit.sum() < 10 or (~fit).sum() < 10:
+                continue
+            without = _sse(N, y, fit, ~fit)
+            regions[label] = 1.0 - _sse(A, y, fit, ~fit) / without if without > 0 else 0.0
+    coef = _solve(A, y)[N.shape[1]:]
+    return (1.0 - cv / base if base > 0 else 0.0), regions, coef
+
+
+def search(channel: str, table, residual, sigma, where, spec, groups=None):
+    """The empirical term of ``channel`` on the points ``where``, or None.
+
+    residual, sigma : over all points [SI]; where : boolean mask of the points to use;
+    groups : per-point recording labels (folds over recordings), or None (folds over points).
+    The terms of :func:`~motorid.discrepancy.empirical.propose` are kept, the last dropped
+    first, while the where-not-fitted checks fail: fitted on the lower half (of the speeds, of
+    |ΔP|) a term must predict the upper half better than the base model does, and its gains
+    over the four checks must not average below zero, none below −25 % (fitted on the upper
+    half, a small term may lose a little to the noise below); and it must remove :data:`MIN_GAIN` of the
+    held-out χ².
+    """
+    ok = np.asarray(where, bool) & np.isfinite(residual) & np.isfinite(sigma) & (np.asarray(sigma) > 0)
+    if ok.sum() < MIN_POINTS:
+        return None
+    idx = np.flatnonzero(ok)
+    x = point_samples(table, idx)
+    if groups is not None and np.unique(np.asarray(groups)[idx]).size >= 2 * FOLDS:
+        run_of = np.unique(np.asarray(groups)[idx], return_inverse=True)[1]
+    else:  # each point its own "run", in a seeded random order (the folds interleave the grid)
+        run_of = np.random.default_rng(0).permutation(idx.size)
+    r, sig = np.asarray(residual, float)[idx], np.asarray(sigma, float)[idx]
+    term = propose(channel, x, r, sig, run_of, spec, folds=FOLDS, harmonics=False)
+    if term is None:
+        return None
+    runs = np.unique(run_of)
+    fold = np.array([dict(zip(runs, np.arange(runs.size) % FOLDS))[k] for k in run_of])
+    w = 1.0 / sig
+    for k in range(len(term.terms), 0, -1):
+        terms = term.terms[:k]
+        gain, regions, coef = _checked(channel, x, r * w, w, fold, terms, spec)
+        outward = [v for name, v in regions.items() if name.startswith("fit on low")]
+        if (gain >= MIN_GAIN and outward and min(outward) > 0.0 and np.mean(list(regions.values())) > 0.0
+                and min(regions.values()) > -0.25):
+            terms = [(t, float(c)) for (t, _), c in zip(terms, coef)]
+            size = float(np.sqrt(np.mean((np.column_stack([t.values(x) for t, _ in terms]) @ coef) ** 2)))
+            return EmpiricalTerm(channel, terms, float(gain), regions, size)
+    return None
+
+
+def _columns(channel, term, x, spec) -> np.ndarray:
+    return np.column_stack([nuisance(channel, x, spec)] + [t.values(x)[:, None] for t, _ in term.terms])
+
+
+class MotoridWithTerms(MotoridModel):
+    """motorid (+ ``mechanisms``) + on each channel the empirical term its training points support."""
+
+    def __init__(self, spec, mechanisms=(), label: str | None = None, groups=None):
+        super().__init__(spec, mechanisms, label)
+        self.groups = groups
+
+    def fit_split(self, table, train):
+        base = super().fit_split(table, train)
+        pred = base.predict(table)
+        out = _FittedWithTerms(base)
+        for c in CHANNELS:
+            y = np.asarray(table.measured[c], float)
+            if not np.isfinite(y).any() or not np.isfinite(pred[c]).any():
+                continue
+            r = y - pred[c]
+            sigma = np.asarray(base.fit.table_sigma[c], float)
+            term = search(c, table, r, sigma, train, self.spec, self.groups)
+            if term is None:
+                continue
+            ok = np.asarray(train, bool) & np.isfinite(r)
+            x = point_samples(table, np.flatnonzero(ok))
+            A = _columns(c, term, x, self.spec) / sigma[ok][:, None]
+            out.terms[c] = (term, _solve(A, r[ok] / sigma[ok]))
+        return out
+
+
+class _FittedWithTerms:
+    def __init__(self, base):
+        self.base = base
+        self.fit = base.fit
+        self.terms: dict = {}
+
+    def predict(self, table) -> dict:
+        out = self.base.predict(table)
+        x = point_samples(table)
+        for c, (term, coef) in self.terms.items():
+            out[c] = out[c] + _columns(c, term, x, self.base.owner.spec) @ coef
+        return out
+
+
+_WORDS = {"torque": "the shaft torque", "q_a": "the port-A flow", "q_b": "the port-B flow", "q_case": "the case drain flow"}
+
+
+def unexplained_table_entries(fit, spec) -> list:
+    """``unexplained`` entries of a table diagnosis: per channel, the empirical term its residuals
+    support after the final fit (every point), in words and numbers; [] where none holds."""
+    table = fit.table
+    entries = []
+    for c in CHANNELS:
+        r = np.asarray(fit.table_residuals[c], float)
+        if not np.isfinite(r).any():
+            continue
+        sigma = np.asarray(fit.table_sigma[c], float)
+        term = search(c, table, r, sigma, np.ones(len(table), bool), spec)
+        if term is None:
+            continue
+        d = term.as_dict()
+        checks = ", ".join(f"{k}: {100 * v:.0f} %" for k, v in term.region_gain.items())
+        text = (f"{_WORDS[c]} differs from the model by {d['size_words']}, in a shape no catalog mechanism "
+                f"takes; proposed empirical term (not a named mechanism): {term.formula}; it removes "
+                f"{100 * term.held_out_gain:.0f} % of the held-out residual (5-fold over the points) and, "
+                f"where it was not fitted, {checks}")
+        entries.append({"channel": c, "description": text, "empirical_term": d,
+                        "residual_rms": float(np.sqrt(np.nanmean(r**2)))})
+    return entries
