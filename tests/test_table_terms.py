@@ -79,3 +79,26 @@ def test_held_out_points_are_predicted_better_with_the_term(squared):
 def test_clean_maps_give_no_term(tmp_path, seed):
     table = _map(tmp_path, seed, False)
     assert unexplained_table_entries(fit_table(table, SPEC), SPEC) == []
+
+
+def test_diagnose_command_reports_the_term_unexplained(tmp_path, capsys):
+    import json
+
+    from motorid.cli import main
+
+    _map(tmp_path, 11, True)
+    motor = tmp_path / "motor.toml"
+    motor.write_text(SPEC.to_toml())
+    out = tmp_path / "dg"
+    assert main(["diagnose", str(tmp_path / "map_11_True.csv"), "--motor", str(motor), "--out", str(out),
+                 "--quiet"]) == 0
+    doc = json.loads((out / "diagnosis.json").read_text())
+    assert doc["mismatch"] is True
+    assert doc["mechanisms"] == []  # no catalog stand-in for a law none of them holds
+    assert [u["channel"] for u in doc["unexplained"]] == ["torque"]
+    printed = capsys.readouterr().out
+    assert "unexplained:" in printed and "empirical term" in printed
+    # the comparison's motorid row carries the term (chosen again on each fold's training points)
+    rows = doc["comparison"]["models"]
+    ours = next(k for k in rows if k.startswith("motorid"))
+    assert ours.endswith("empirical term"), list(rows)
