@@ -11,11 +11,6 @@ one model through its hooks (:mod:`motorid.physics.base`):
   case drain nothing.  The other D-proportional terms (K_v D μ ω, K_F D(P_A+P_B),
   K_FS) are absorbed by their coefficients, which are then relative to the
   spec's D: divide them by 1 + ε for coefficients relative to the true D.
-- ``inertia_error``: the rotating inertia is J' = J + ΔJ, J the spec's.  The
-  inertia torque −J α (Eq. 17) carries no fitted parameter, so a wrong J shows
-  where the shaft accelerates: the speed ripple a dynamometer cannot hold out at
-  the piston order (α = dω/dt at n times the shaft frequency) and the load-driven
-  starts.  Where the logs hold no acceleration it is not identifiable (said so).
 - ``leak_phase``: the phase φ of K_LB(θ) = K_LA(θ − φ) (Eq. 55) is φ_spec + δφ,
   φ_spec = π/n unless the spec sets it.  It moves the shaft-angle pattern of the
   port-B-to-case leakage, so it shows in the case drain and port B flow
@@ -104,40 +99,6 @@ class DisplacementError(CatalogMechanism):
             return (f"the measured displacement is {d * (1 + eps):.4g} cm³/rev, {100 * eps:+.3g} % from the spec's "
                     f"{d:.4g} cm³/rev (K_v, K_F, K_FS are relative to the spec's D)")
         return f"the true displacement is {100 * eps:+.3g} % from the spec's (D' = D·(1 {'+' if eps >= 0 else '−'} {abs(eps):.3g}))"
-
-
-class InertiaError(CatalogMechanism):
-    """The rotating inertia J' = J_spec + ΔJ [kg·m²].
-
-    ΔT = −ΔJ·α (Bartos 1992 Eq. 17, the inertia torque), α = dω/dt of the samples.
-    """
-
-    single_start = True  # linear in ΔJ
-    id = "inertia_error"
-    name = "rotating inertia differs from the spec"
-    physics = ("The inertia of the rotating group (shaft, cylinder block, pistons, and whatever of the coupling "
-               "the spec left out) differs from the value in the motor spec. The torque the transducer reads "
-               "then differs by the missing inertia times the shaft's angular acceleration: in the speed ripple "
-               "at the piston order that the dynamometer does not hold out, and while the load accelerates the "
-               "shaft after breakaway.")
-    reference = ("R. D. Bartos, JPL TDA Progress Report 42-111, 1992 (Eq. 17, the inertia torque); ISO 4392-1:2002 "
-                 "(the constant-speed runs whose residual speed ripple shows it)")
-    channels = ("torque",)
-    parameters = {
-        "inertia_error.dJ": ParameterInfo("kg·m²", "rotating inertia minus the spec's", False, 1e-3),
-    }
-    signature = ("running torque in phase with the shaft's angular acceleration dω/dt: at the piston order where "
-                 "the speed ripples, and while the shaft speeds up or slows down; nothing at constant speed")
-
-    def running(self, params, spec, samples, ch):
-        return ch._replace(torque=ch.torque + torque.inertia_torque(self.param(params, "dJ"), samples.acceleration))
-
-    def describe(self, values, spec=None) -> str:
-        dj = self.value(values, "dJ")
-        if spec is not None and spec.inertia:
-            return (f"the rotating inertia is {spec.inertia + dj:.4g} kg·m², {dj:+.3g} kg·m² "
-                    f"({100 * dj / spec.inertia:+.3g} %) from the spec's {spec.inertia:.4g} kg·m²")
-        return f"the rotating inertia is {dj:+.3g} kg·m² from the spec's"
 
 
 class LeakPhase(CatalogMechanism):
