@@ -190,7 +190,7 @@ class EmpiricalTerm:
                 "held_out_gain": self.held_out_gain, "region_gain": self.region_gain}
 
 
-def _cv_sse(Z, y, cols, fold, folds: int) -> float:
+def cv_sse(Z, y, cols, fold, folds: int) -> float:
     """Sum of squared held-out residuals, K-fold over runs, of least squares on columns ``cols``."""
     total = 0.0
     for f in range(folds):
@@ -206,7 +206,7 @@ def _forward(Z, y, k_free: int, fold, folds: int, max_terms: int = MAX_TERMS, sc
     smallest held-out χ² is taken if it lowers it by at least MIN_STEP_GAIN.  Returns the chosen
     column indices and the held-out χ² before and after."""
     cols = list(range(k_free))
-    base = cur = _cv_sse(Z, y, cols, fold, folds)
+    base = cur = cv_sse(Z, y, cols, fold, folds)
     chosen: list[int] = []
     lib = np.arange(k_free, Z.shape[1])
     norms0 = np.sqrt(np.sum(Z[:, lib] ** 2, axis=0))
@@ -221,7 +221,7 @@ def _forward(Z, y, k_free: int, fold, folds: int, max_terms: int = MAX_TERMS, sc
         for j in np.argsort(-score)[:screen]:
             if not np.isfinite(score[j]):
                 continue
-            cv = _cv_sse(Z, y, cols + [int(lib[j])], fold, folds)
+            cv = cv_sse(Z, y, cols + [int(lib[j])], fold, folds)
             if cv < best_cv:
                 best, best_cv = int(lib[j]), cv
         if best is None or best_cv > cur - MIN_STEP_GAIN * base:
@@ -258,11 +258,9 @@ def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regi
     scale[scale == 0] = 1.0
     Z = X / scale
     k = N.shape[1]
-    runs = np.unique(run_of)
-    if runs.size < 2 * folds:
+    if np.unique(run_of).size < 2 * folds:
         return None
-    fold_of = {r: i % folds for i, r in enumerate(runs)}
-    fold = np.array([fold_of[r] for r in run_of])
+    fold = fold_labels(run_of, folds)
 
     chosen_idx, base, best = _forward(Z, y, k, fold, folds)
     if not chosen_idx:
@@ -275,18 +273,30 @@ def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regi
     # coefficients in SI: the columns were divided by σ (weights) and by their RMS (scale)
     size = float(np.sqrt(np.mean((L[ok][:, [i - k for i in chosen_idx]] @ beta[chosen_idx]) ** 2)))
     gain = 1.0 - best / base if base > 0 else 0.0
-    region_gain = {}
-    idx = list(chosen_idx)
-    for name, mask in (regions or {}).items():
-        m = np.asarray(mask)[ok]
+    region_gain = region_gains(Z, y, k, list(chosen_idx), {n: np.asarray(m)[ok] for n, m in (regions or {}).items()})
+    return EmpiricalTerm(channel, chosen, float(gain), region_gain, size)
+
+
+def fold_labels(run_of, folds: int) -> np.ndarray:
+    """Fold index (0 … folds−1) of each sample: the runs, in sorted order, dealt round the folds."""
+    runs, inverse = np.unique(np.asarray(run_of), return_inverse=True)
+    return (np.arange(runs.size) % folds)[inverse]
+
+
+def region_gains(Z, y, k: int, idx: list, regions: dict) -> dict:
+    """Where-not-fitted check: for each region split (name (first, second) → mask, True: first) and
+    each way round, the fraction of the held-out part's residual χ² that the columns ``idx`` remove
+    when added to the first ``k`` (the nuisance columns), both fitted on the other part."""
+    out = {}
+    cols = list(range(k)) + list(idx)
+    for name, m in regions.items():
         for tr_mask, label in ((m, f"fit on {name[0]}, predict {name[1]}"), (~m, f"fit on {name[1]}, predict {name[0]}")):
             te_mask = ~tr_mask
             if tr_mask.sum() < 10 or te_mask.sum() < 10:
                 continue
-            cols = list(range(k)) + idx
             b_with = np.linalg.lstsq(Z[tr_mask][:, cols], y[tr_mask], rcond=None)[0]
             b_without = np.linalg.lstsq(Z[tr_mask][:, :k], y[tr_mask], rcond=None)[0]
             r_with = float(np.sum((y[te_mask] - Z[te_mask][:, cols] @ b_with) ** 2))
             r_without = float(np.sum((y[te_mask] - Z[te_mask][:, :k] @ b_without) ** 2))
-            region_gain[label] = 1.0 - r_with / r_without if r_without > 0 else 0.0
-    return EmpiricalTerm(channel, chosen, float(gain), region_gain, size)
+            out[label] = 1.0 - r_with / r_without if r_without > 0 else 0.0
+    return out

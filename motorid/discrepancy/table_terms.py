@@ -24,7 +24,8 @@ import types
 import numpy as np
 
 from motorid.comparators.evaluate import CHANNELS, MotoridModel
-from motorid.discrepancy.empirical import EmpiricalTerm, nuisance, propose
+from motorid.discrepancy.empirical import EmpiricalTerm, cv_sse, fold_labels, nuisance, propose, region_gains
+from motorid.discrepancy.locate import CHANNEL_WORDS
 
 #: folds over the training points (or their recordings) of the term search
 FOLDS = 5
@@ -58,25 +59,19 @@ def _solve(A, y):
     return np.linalg.lstsq(A / scale, y, rcond=None)[0] / scale
 
 
-def _sse(A, y, fit, test) -> float:
-    return float(np.sum((y[test] - A[test] @ _solve(A[fit], y[fit])) ** 2))
-
-
 def _checked(channel, x, y, w, fold, terms, spec):
     """(held-out gain K-fold, where-not-fitted gains, coefficients) of ``terms`` on top of the
-    base model's own shapes (weighted: y, columns × w)."""
+    base model's own shapes (weighted: y, columns × w), by the same K-fold and region checks
+    as :func:`~motorid.discrepancy.empirical.propose`."""
     N = nuisance(channel, x, spec) * w[:, None]
-    A = np.column_stack([N] + [t.values(x) * w for t, _ in terms])
-    base = sum(_sse(N, y, fold != f, fold == f) for f in np.unique(fold))
-    cv = sum(_sse(A, y, fold != f, fold == f) for f in np.unique(fold))
-    regions = {}
-    for (lo, hi), low in _regions(x).items():
-        for fit, label in ((low, f"fit on {lo}, predict {hi}"), (~low, f"fit on {hi}, predict {lo}")):
-            if fit.sum() < 10 or (~fit).sum() < 10:
-                continue
-            without = _sse(N, y, fit, ~fit)
-            regions[label] = 1.0 - _sse(A, y, fit, ~fit) / without if without > 0 else 0.0
-    coef = _solve(A, y)[N.shape[1]:]
+    X = np.column_stack([N] + [t.values(x) * w for t, _ in terms])
+    scale = np.sqrt(np.mean(X**2, axis=0))  # columns span 1 … 1e14 in SI: scaled, or lstsq drops some
+    scale[scale == 0] = 1.0
+    Z, k = X / scale, N.shape[1]
+    base = cv_sse(Z, y, list(range(k)), fold, FOLDS)
+    cv = cv_sse(Z, y, list(range(Z.shape[1])), fold, FOLDS)
+    regions = region_gains(Z, y, k, list(range(k, Z.shape[1])), _regions(x))
+    coef = (np.linalg.lstsq(Z, y, rcond=None)[0] / scale)[k:]
     return (1.0 - cv / base if base > 0 else 0.0), regions, coef
 
 
@@ -105,8 +100,7 @@ def search(channel: str, table, residual, sigma, where, spec, groups=None):
     term = propose(channel, x, r, sig, run_of, spec, folds=FOLDS, harmonics=False)
     if term is None:
         return None
-    runs = np.unique(run_of)
-    fold = np.array([dict(zip(runs, np.arange(runs.size) % FOLDS))[k] for k in run_of])
+    fold = fold_labels(run_of, FOLDS)
     w = 1.0 / sig
     for k in range(len(term.terms), 0, -1):
         terms = term.terms[:k]
@@ -165,9 +159,6 @@ class _FittedWithTerms:
         return out
 
 
-_WORDS = {"torque": "the shaft torque", "q_a": "the port-A flow", "q_b": "the port-B flow", "q_case": "the case drain flow"}
-
-
 def unexplained_table_entries(fit, spec) -> list:
     """``unexplained`` entries of a table diagnosis: per channel, the empirical term its residuals
     support after the final fit (every point), in words and numbers; [] where none holds."""
@@ -183,7 +174,7 @@ def unexplained_table_entries(fit, spec) -> list:
             continue
         d = term.as_dict()
         checks = ", ".join(f"{k}: {100 * v:.0f} %" for k, v in term.region_gain.items())
-        text = (f"{_WORDS[c]} differs from the model by {d['size_words']}, in a shape no catalog mechanism "
+        text = (f"the {CHANNEL_WORDS[c]} differs from the model by {d['size_words']}, in a shape no catalog mechanism "
                 f"takes; proposed empirical term (not a named mechanism): {term.formula}; it removes "
                 f"{100 * term.held_out_gain:.0f} % of the held-out residual (5-fold over the points) and, "
                 f"where it was not fitted, {checks}")
