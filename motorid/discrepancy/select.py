@@ -7,7 +7,9 @@ Forward selection over the catalog (the registry of mechanisms, :mod:`motorid.ph
    that touches a channel with structure, with the noise levels and outlier
    set of the base fit held fixed so that χ² values compare — on the reduced
    data (:mod:`motorid.discrepancy.screen`: cell means of a coarse shaft-angle
-   grid, no per-sample work), the finalist then refitted on every sample;
+   grid, no per-sample work): every candidate ranked by the χ² a Gauss-Newton
+   update on the cells' normal equations predicts (no fit), the best ranked
+   fitted on the cells, the finalist then refitted on every sample;
 3. score each by evidence that punishes extra parameters,
    ΔBIC = Δχ² − k ln N (k extra parameters, N residuals), and the best few by
    the χ² of runs held out of the fit (K-fold over runs, on the same cells);
@@ -40,6 +42,7 @@ class Candidate:
     delta_bic: float
     cv_gain: float | None = None  # held-out χ² of the current model minus this one's
     removed: list = field(default_factory=list)  # structures it explains
+    scored_by: str = "fit on the cells"  # or "linear update" (ranked, not fitted), "fit on every sample"
 
 
 @dataclass
@@ -149,25 +152,53 @@ def _zeros_shown_to_wander(dataset) -> bool:
         return False
 
 
+#: candidates fitted on the cells after the linear-update ranking: at least this many ...
+SCREEN_FIT_AT_LEAST = 3
+#: ... and every one whose predicted Δχ² reaches this share of the best prediction
+SCREEN_FIT_SHARE = 0.01
+
+
+def _prediction_starts(current: dict, mech) -> list:
+    """The fit's starts and the mechanism at its neutral values (adding nothing: the linear
+    response there is the score test's)."""
+    return _starts(current, mech) + [{**current, **mech.neutral()}]
+
+
 def _screen_candidates(screen, catalog, current_mechs, current, channels, dataset, n_res, say,
                        wandering: dict | None = None) -> list:
-    """Every catalog mechanism that shows where structure was found, fitted on the screening
-    cells from several starts → [Candidate] (fit: the CellFit), best first."""
+    """Every catalog mechanism that shows where structure was found, ranked by the χ² a
+    Gauss-Newton update on the cells predicts (:meth:`Screen.predicted_chi2`: one evaluation
+    of the normal equations per start, no fit); the best ranked (:data:`SCREEN_FIT_AT_LEAST`,
+    and any within :data:`SCREEN_FIT_SHARE` of the best) then fitted on the cells from several
+    starts → [Candidate] (fit: the CellFit, None where only predicted), fitted ones first, each
+    group best first."""
     from motorid.progress import bar
 
     todo = [m for m in catalog
             if m not in current_mechs and channels & set(getattr(m, "shows_in", m.channels))
             and not set(m.channels) & set(wandering or {})
             and getattr(m, "seen_by", lambda ds: True)(dataset)]  # e.g. pump-mode law: no pump runs
-    scored = []
-    for mech in bar(todo, desc="candidates", unit="mechanism"):
+    predicted = []
+    for mech in bar(todo, desc="candidates (linear update)", unit="mechanism"):
+        chi2 = screen.predicted_chi2(current_mechs + [mech], _prediction_starts(current.params_all, mech))
+        predicted.append((current.chi2 - chi2, mech))
+    predicted.sort(key=lambda x: -x[0])
+    top = max((d for d, _ in predicted), default=0.0)
+    chosen = [m for i, (d, m) in enumerate(predicted) if i < SCREEN_FIT_AT_LEAST or d >= SCREEN_FIT_SHARE * top]
+    fitted, ranked = [], []
+    for mech in bar(chosen, desc="candidates (fit on the cells)", unit="mechanism"):
         fit = screen.fit_best_start(current_mechs + [mech], _starts(current.params_all, mech))
         d = current.chi2 - fit.chi2
         k = sum(1 for p in mech.parameters if p in fit.free)
-        scored.append(Candidate(mech, fit, d, d - k * np.log(n_res)))
+        fitted.append(Candidate(mech, fit, d, d - k * np.log(n_res), scored_by="fit on the cells"))
         cached_jit.release(mech)  # its compiled programs: memory does not grow with the catalog
-    scored.sort(key=lambda c: -c.delta_bic)
-    return scored
+    for d, mech in predicted:
+        if mech not in chosen:
+            k = len(mech.parameters)
+            ranked.append(Candidate(mech, None, d, d - k * np.log(n_res), scored_by="linear update"))
+            cached_jit.release(mech)
+    fitted.sort(key=lambda c: -c.delta_bic)
+    return fitted + ranked
 
 
 def _near_tie(scored: list, min_evidence: float) -> bool:
@@ -183,6 +214,7 @@ def _refit_in_full(cands: list, dataset, spec, current_mechs, noise, inliers, cu
         full = _full_fit(dataset, spec, current_mechs + [cand.mechanism], noise, inliers, cand.fit.params_all)
         cand.screened = (cand.delta_chi2, cand.delta_bic)
         cand.fit = full
+        cand.scored_by = "fit on every sample"
         cand.delta_chi2 = current_full.chi2 - full.chi2
         k = sum(1 for p in cand.mechanism.parameters if full.identifiable.get(p))
         cand.delta_bic = cand.delta_chi2 - k * np.log(n_res)
@@ -260,7 +292,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
             lap("held-out runs on the cells")
         best = None
         for cand in scored[:cv_top]:
-            if cand.delta_bic <= min_evidence:
+            if cand.delta_bic <= min_evidence or cand.fit is None:
                 continue
             if folds > 1:
                 screened = cand.fit if isinstance(cand.fit, CellFit) else None
@@ -296,6 +328,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
                        "cv_gain": c.cv_gain, "accepted": c is best,
                        "screened_delta_chi2": getattr(c, "screened", (c.delta_chi2,))[0],
+                       "scored_by": c.scored_by,
                        "extrapolation": getattr(c, "extrapolation", None)} for c in scored])
         if best is None:
             break
