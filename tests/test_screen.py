@@ -123,3 +123,21 @@ def test_linear_update_ranks_like_the_fits(campaign):
     for mech_id in ("torque_meter_gain", "turbulent_leakage", "hydrodynamic_torque"):
         assert pred[mech_id] == pytest.approx(fitted[mech_id], rel=1e-3, abs=1e-2)
     assert pred["turbulent_leakage"] < 1.0 < pred["torque_meter_gain"]
+
+
+def test_harmonic_fits_are_one_least_squares_solve_per_order():
+    """locate's all-orders-at-once harmonic fits against a least-squares solve per order, on
+    samples that cover the shaft unevenly (so the orders are not orthogonal)."""
+    from motorid.discrepancy.locate import _harmonic_fits
+
+    rng = np.random.default_rng(5)
+    theta = np.sort(rng.uniform(0.0, 2.3 * np.pi, 300)) ** 1.1
+    z = 0.7 * np.cos(3 * theta - 0.4) + rng.normal(size=300) + 2.0
+    for k, beta, explained in _harmonic_fits(theta, z, 9):
+        X = np.column_stack([np.cos(k * theta), np.sin(k * theta)])
+        X = X - X.mean(axis=0)
+        ref = np.linalg.lstsq(X, z - z.mean(), rcond=None)[0]
+        assert np.allclose(beta, ref, rtol=1e-9, atol=1e-12)
+        assert explained == pytest.approx(float(np.sum((X @ ref) ** 2)), rel=1e-9)
+        if k == 3:
+            assert np.hypot(*beta) == pytest.approx(0.7, abs=0.2)

@@ -297,6 +297,27 @@ def _ripple_size(amps, zamps, runs_seen, speed_groups):
     return best
 
 
+def _harmonic_fits(theta, z, kmax: int):
+    """Each shaft order k = 1…kmax fitted alone to z with an intercept (a run's offset is not
+    angle structure): z − z̄ ≈ a (cos kθ − mean) + b (sin kθ − mean) → [(k, (a, b), Σ fit²)].
+    All orders at once from the 2×2 normal equations of each (the same numbers as one
+    least-squares solve per order)."""
+    e = np.exp(1j * np.outer(theta, np.arange(1, kmax + 1)))  # n × K
+    c, s = e.real - e.real.mean(axis=0), e.imag - e.imag.mean(axis=0)
+    y = z - z.mean()
+    cc, ss, cs = np.sum(c * c, axis=0), np.sum(s * s, axis=0), np.sum(c * s, axis=0)
+    bc, bs = y @ c, y @ s
+    out = []
+    for k in range(kmax):
+        det = cc[k] * ss[k] - cs[k] ** 2
+        if det > 1e-12 * max(cc[k] * ss[k], 1e-300):
+            beta = np.array([ss[k] * bc[k] - cs[k] * bs[k], cc[k] * bs[k] - cs[k] * bc[k]]) / det
+        else:  # the angles do not tell cos from sin at this order
+            beta = np.linalg.lstsq(np.column_stack([c[:, k], s[:, k]]), y, rcond=None)[0]
+        out.append((k + 1, beta, float(beta[0] * bc[k] + beta[1] * bs[k])))
+    return out
+
+
 def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec, speed_groups=None) -> list:
     theta = np.asarray(s.theta)
     t = np.asarray(s.time)
@@ -321,19 +342,15 @@ def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec, speed_groups
         step = abs(np.median(speed[sel])) * dt
         span = np.ptp(np.unwrap(th)) if step < np.pi / 2 else 0.0
         if span >= 2 * np.pi * 0.9:
-            for k in range(1, kmax + 1):
-                if step * k > 2 * np.pi / 6:
-                    break
-                # with an intercept: a run's offset is not angle structure
-                X = np.column_stack([np.cos(k * th), np.sin(k * th)])
-                X = X - X.mean(axis=0)
-                beta, *_ = np.linalg.lstsq(X, zr - zr.mean(), rcond=None)
-                fit = X @ beta
-                stat_k[k] += np.sum(fit**2) / inflate
-                dof_k[k] += 2
-                amp_k[k].append(np.hypot(*beta) * np.median(sig[sel]))
-                zamp_k[k].append(np.hypot(*beta))
-                run_k[k].append(r)
+            orders = [k for k in range(1, kmax + 1) if step * k <= 2 * np.pi / 6]
+            if orders:
+                sig_r = np.median(sig[sel])
+                for k, beta, explained in _harmonic_fits(th, zr, len(orders)):
+                    stat_k[k] += explained / inflate
+                    dof_k[k] += 2
+                    amp_k[k].append(np.hypot(*beta) * sig_r)
+                    zamp_k[k].append(np.hypot(*beta))
+                    run_k[k].append(r)
         # time trend within the run
         if np.ptp(tr) > 0:
             u = 2 * (tr - tr.min()) / np.ptp(tr) - 1
