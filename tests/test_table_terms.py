@@ -102,3 +102,34 @@ def test_diagnose_command_reports_the_term_unexplained(tmp_path, capsys):
     rows = doc["comparison"]["models"]
     ours = next(k for k in rows if k.startswith("motorid"))
     assert ours.endswith("empirical term"), list(rows)
+
+
+def test_a_joint_diagnosis_of_logs_and_table_reports_the_tables_term(tmp_path):
+    """Logs and a table of one motor fitted together: the ΔP² torque loss carried by the table
+    alone is reported as an empirical term on the table's points, and the same table without it
+    gives no entry."""
+    from conftest import simulated
+
+    from motorid.discrepancy.tables import diagnose_table
+    from motorid.identify.extract import extract
+    from motorid.identify.least_squares import fit_least_squares
+    from motorid.io.spec import MotorSpec as Spec
+
+    frame, spec, truth = simulated(protocols=("constant_speed", "startability"))
+    spec = Spec(spec.name, spec.pistons, spec.displacement, spec.inertia, oil=OilSpec(temp_C=50.0))
+    ds = extract(frame, spec)
+    logs = fit_least_squares(ds, spec)
+    grid = map_grid([100, 400, 900, 1500, 2200, 3000], [20, 70, 130, 190, 250, 300], 4, p_low_bar=30.0)
+    found = {}
+    for extra in (True, False):
+        df = simulate_map(spec, truth, grid, noise=NOISE, rng=np.random.default_rng(21))
+        if extra:
+            dp = (df["p_a_bar"] - df["p_b_bar"]).to_numpy() * 1e5
+            df["torque_Nm"] -= np.sign(df["speed_rpm"].to_numpy()) * A_SQ * dp**2
+        df.to_csv(tmp_path / f"joint_{extra}.csv", index=False)
+        table = read_table(tmp_path / f"joint_{extra}.csv", spec)
+        dg = diagnose_table(table, spec, candidates=[], dataset=ds, log_fit=logs)
+        found[extra] = dg["unexplained"]
+    assert [e["channel"] for e in found[True]] == ["torque"]
+    assert "²" in found[True][0]["empirical_term"]["formula"]
+    assert found[False] == []

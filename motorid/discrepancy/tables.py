@@ -78,7 +78,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
         bic, best_fit = b, tf
     from motorid.discrepancy.table_terms import MotoridWithTerms, unexplained_table_entries
 
-    unexplained = unexplained_table_entries(best_fit, spec) if dataset is None else []
+    unexplained = unexplained_table_entries(best_fit, spec)  # on the table's points, logs or not
     model = None
     if unexplained:  # held out, the empirical term is chosen again on each fold's training points alone
         model = MotoridWithTerms(spec, current, label="motorid" + "".join(" + " + m.id for m in current)
