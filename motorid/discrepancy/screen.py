@@ -32,6 +32,9 @@ from motorid.identify.types import CHANNELS, RUNNING_CHANNELS, FitOptions
 
 #: shaft-angle cells per piston pitch of the screening grid
 SCREEN_BINS_PER_PITCH = 8
+#: rtol and atol of Levenberg-Marquardt from each screening start (the best start is then
+#: solved to the fit's own tolerance)
+SCREEN_START_TOLERANCE = 1e-4
 
 _versions = itertools.count(1 << 20)  # cells versions of the reweighted problems (never reused)
 
@@ -127,9 +130,11 @@ class Screen:
             prob.cells_version = next(_versions)
         return prob
 
-    def fit(self, mechanisms, initial: dict, max_steps: int | None = None, weights=None) -> CellFit:
-        """Fit the base model plus ``mechanisms`` on the cells, from ``initial``."""
-        opt = self.options if max_steps is None else replace(self.options, max_steps=max_steps)
+    def fit(self, mechanisms, initial: dict, tolerance: float | None = None, weights=None) -> CellFit:
+        """Fit the base model plus ``mechanisms`` on the cells, from ``initial`` (``tolerance``:
+        a looser rtol and atol of Levenberg-Marquardt, for screening starts; the compiled
+        program is the same)."""
+        opt = self.options if tolerance is None else replace(self.options, rtol=tolerance, atol=tolerance)
         names, start = start_values(self.spec, mechanisms, opt, initial)
         reasons = coverage_reasons(self.dataset, self.spec, names)
         held = {k: start[k] for k in names if k in reasons}
@@ -178,16 +183,17 @@ class Screen:
         return float(r @ r)
 
     def fit_best_start(self, mechanisms, starts: list) -> CellFit:
-        """Screen ``starts`` with a few Levenberg-Marquardt steps each, finish the best."""
+        """Screen ``starts`` with a loose Levenberg-Marquardt solve each (rtol = atol =
+        :data:`SCREEN_START_TOLERANCE`), finish the best; one start: fitted at once."""
+        if len(starts) == 1:
+            return self.fit(mechanisms, starts[0])
         best = None
         for start in starts:
-            fit = self.fit(mechanisms, start, max_steps=12)
+            fit = self.fit(mechanisms, start, tolerance=SCREEN_START_TOLERANCE)
             if np.isfinite(fit.chi2) and (best is None or fit.chi2 < best.chi2):
                 best = fit
         if best is None:
             return fit
-        if len(starts) == 1:
-            return self.fit(mechanisms, best.values)
         final = self.fit(mechanisms, best.values)
         return final if final.chi2 <= best.chi2 else best
 

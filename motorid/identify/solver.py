@@ -105,6 +105,12 @@ def _run_levenberg_marquardt(residual, y0, args, rtol, atol, max_steps):
     return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
 
+def _tolerances(opt: FitOptions) -> tuple:
+    """rtol and atol as arrays: traced, so that a loose screening solve and the final one
+    share one compiled program."""
+    return np.asarray(opt.rtol, dtype=np.float64), np.asarray(opt.atol, dtype=np.float64)
+
+
 @cached_jit
 def _levenberg_marquardt(y0, ctx: Ctx, rtol, atol, max_steps):
     """Optimistix LM on the full residual → (y, steps, converged)."""
@@ -129,7 +135,7 @@ class FullBackend:
         scales = parameter_scales(values, free, mechs)
         ctx = self.problem.ctx(scales)
         y0 = to_unconstrained(as_arrays(values), ctx)
-        y, steps, ok = _levenberg_marquardt(y0, ctx, opt.rtol, opt.atol, opt.max_steps)
+        y, steps, ok = _levenberg_marquardt(y0, ctx, *_tolerances(opt), opt.max_steps)
         new = {k: float(v) for k, v in from_unconstrained(y, ctx).items()}
         return new, int(steps), bool(ok)
 
@@ -198,7 +204,7 @@ class CompressedBackend:
                            positive, np.asarray(scales, dtype=np.float64))
         pos = np.array(positive)
         y0 = model.unconstrain(np.array([values[k] for k in free], dtype=float), pos, c.scales, xp=np)
-        y, steps, ok = _levenberg_marquardt_compressed(y0, c, opt.rtol, opt.atol, opt.max_steps)
+        y, steps, ok = _levenberg_marquardt_compressed(y0, c, *_tolerances(opt), opt.max_steps)
         p = model.constrain(np.asarray(y), pos, c.scales, xp=np)
         new = {k: float(p[i]) for i, k in enumerate(free)}
         return new, int(steps), bool(ok)
