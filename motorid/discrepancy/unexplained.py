@@ -12,7 +12,11 @@ Two duties, hooked into :func:`motorid.discrepancy.select.diagnose`:
    5 °C of oil temperature, the same split over the temperature (a law in 1/μ
    and a stand-in ∝ ΔP/μ part there).  The candidate is refused when
    the held-out χ² of some split exceeds that of the all-runs fit on the same
-   samples by more than ``max(MIN_EXCESS, EXCESS_FRACTION·χ²)``.
+   samples by more than ``max(MIN_EXCESS, EXCESS_FRACTION·χ²)`` — counted only where
+   the training half determines the candidate's parameters (each identifiable, its
+   standard error below ``DETERMINED_REL_STD`` of its value): a true Stribeck law
+   fitted on the fast runs alone, or an ω² torque on the slow runs alone, is not
+   determined there and cannot be asked to predict the other half.
 2. :func:`unexplained_entries` — what stays located after the selection, one
    entry per channel: the variables it follows, its size (engineering units and
    in noise levels), its shape (rising or falling along the variable, a shaft
@@ -31,6 +35,19 @@ from motorid.identify.types import FitOptions
 
 MIN_EXCESS = 50.0
 EXCESS_FRACTION = 0.1
+#: a candidate's parameter is determined by a training half where its standard error there is
+#: below this share of its value
+DETERMINED_REL_STD = 0.5
+
+
+def _determined(fit, mechanism) -> bool:
+    """Whether ``fit`` (on a training half) determines every parameter of ``mechanism``."""
+    for k in mechanism.parameters:
+        v, sd = fit.values.get(k), fit.std.get(k)
+        if not fit.identifiable.get(k) or v is None or sd is None or not np.isfinite(sd) \
+                or sd >= DETERMINED_REL_STD * abs(v):
+            return False
+    return True
 
 
 def region_masks(dataset) -> dict:
@@ -79,7 +96,9 @@ def _chi2(fit, inliers, noise, dataset, samples_mask, events_mask) -> float:
 def extrapolation_check(dataset, spec, mechanisms, noise, inliers, full_fit) -> dict:
     """Fit on one half of the speeds (of ΔP), predict the other; compare with the all-runs fit.
 
-    Returns ``{"passed": bool, "splits": [{split, held_out_chi2, all_runs_chi2, excess}]}``.
+    Returns ``{"passed": bool, "splits": [{split, held_out_chi2, all_runs_chi2, excess, determined,
+    failed}]}``; ``mechanisms[-1]`` is the candidate (a split whose training half does not
+    determine its parameters does not count).
     """
     splits, passed = [], True
     for (low_words, high_words), run_low in region_masks(dataset).items():
@@ -94,10 +113,11 @@ def extrapolation_check(dataset, spec, mechanisms, noise, inliers, full_fit) -> 
             held = _chi2(fit, inliers, noise, dataset, ~s_tr, ~e_tr)
             ref = _chi2(full_fit, inliers, noise, dataset, ~s_tr, ~e_tr)
             excess = held - ref
-            bad = excess > max(MIN_EXCESS, EXCESS_FRACTION * ref)
+            determined = _determined(fit, mechanisms[-1]) if mechanisms else True
+            bad = determined and excess > max(MIN_EXCESS, EXCESS_FRACTION * ref)
             passed = passed and not bad
             splits.append({"split": label, "held_out_chi2": held, "all_runs_chi2": ref, "excess": excess,
-                           "failed": bool(bad)})
+                           "determined": bool(determined), "failed": bool(bad)})
     return {"passed": passed, "splits": splits}
 
 
