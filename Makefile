@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --dist loadfile  # two workers, a test file to one (its module fixtures built once)
+	$(PY) -m pytest -q -n 2  # two workers: the diagnose tests are minutes of CPU each
 
 demo: $(STAMP)
 	$(PY) -m motorid demo

@@ -26,8 +26,9 @@ def test_real_map_fits_and_predicts_held_out_points_like_the_classical_models(fo
     from motorid.io.tables import is_table, read_table
     from motorid.io.spec import load_motor_spec
 
-    if not is_table(path):
-        pytest.skip(f"{path.name} is a log, not a table")
+    # every CSV shipped beside a motor.toml is an operating-point table: one that does not read as
+    # a table fails here instead of being skipped (a malformed table must not pass unseen)
+    assert is_table(path), f"{path} is not an operating-point table (BENCH_LOG_FORMAT.md)"
     spec = load_motor_spec(folder / "motor.toml")
     table = read_table(path, spec)
     tf = fit_table(table, spec)
