@@ -116,6 +116,7 @@ class Screen:
                          if c == "breakaway" else
                          np.concatenate([self.template.cell_run, np.full(w[c].size - self.template.n_cells, -1)]))
                      for c in obs}
+        self._coverage: dict = {}  # parameter names → what the data cannot see (coverage_reasons)
 
     @property
     def n_cells(self) -> int:
@@ -130,15 +131,24 @@ class Screen:
             prob.cells_version = next(_versions)
         return prob
 
+    def _parameters(self, mechanisms, initial: dict) -> tuple:
+        """(start, free, held, reasons) of the base model plus ``mechanisms`` from ``initial``:
+        what the data cannot see is held (``coverage_reasons``, asked once per parameter set;
+        ``reasons`` is a fresh dict, which the solver may add to)."""
+        names, start = start_values(self.spec, mechanisms, self.options, initial)
+        key = tuple(names)
+        if key not in self._coverage:
+            self._coverage[key] = coverage_reasons(self.dataset, self.spec, names)
+        reasons = dict(self._coverage[key])
+        held = {k: start[k] for k in names if k in reasons}
+        return start, [k for k in names if k not in held], held, reasons
+
     def fit(self, mechanisms, initial: dict, tolerance: float | None = None, weights=None) -> CellFit:
         """Fit the base model plus ``mechanisms`` on the cells, from ``initial`` (``tolerance``:
         a looser rtol and atol of Levenberg-Marquardt, for screening starts; the compiled
         program is the same)."""
         opt = self.options if tolerance is None else replace(self.options, rtol=tolerance, atol=tolerance)
-        names, start = start_values(self.spec, mechanisms, opt, initial)
-        reasons = coverage_reasons(self.dataset, self.spec, names)
-        held = {k: start[k] for k in names if k in reasons}
-        free = [k for k in names if k not in held]
+        start, free, held, reasons = self._parameters(mechanisms, initial)
         prob = self._problem(mechanisms, free, held, weights)
         values = {k: float(start[k]) for k in free}
         values, _, _, free, _ = solve(prob, values, free, reasons, opt, first=True)
@@ -161,10 +171,7 @@ class Screen:
         best = np.inf
         added = {k for m in mechanisms[-1:] for k in m.parameters}
         for initial in starts:
-            names, start = start_values(self.spec, mechanisms, self.options, initial)
-            reasons = coverage_reasons(self.dataset, self.spec, names)
-            held = {k: start[k] for k in names if k in reasons}
-            free = [k for k in names if k not in held]
+            start, free, held, _ = self._parameters(mechanisms, initial)
             if not free:
                 continue
             prob = self._problem(mechanisms, free, held)

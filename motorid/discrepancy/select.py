@@ -183,7 +183,7 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
         chi2 = screen.predicted_chi2(current_mechs + [mech], _prediction_starts(current.params_all, mech))
         predicted.append((current.chi2 - chi2, mech))
     predicted.sort(key=lambda x: -x[0])
-    top = max((d for d, _ in predicted), default=0.0)
+    top = predicted[0][0] if predicted else 0.0
     chosen = [m for i, (d, m) in enumerate(predicted) if i < SCREEN_FIT_AT_LEAST or d >= SCREEN_FIT_SHARE * top]
     fitted, ranked = [], []
     for mech in bar(chosen, desc="candidates (fit on the cells)", unit="mechanism"):
