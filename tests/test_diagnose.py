@@ -83,12 +83,13 @@ def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys):
     assert set(m) >= {"id", "name", "channels", "where", "explanation", "parameters", "evidence"}
     assert m["parameters"]["torque_offset.T0"]["unit"] == "N·m"
     assert "torque_offset" in out
-    # every candidate says how it was scored: the accepted one fitted on every sample, the
-    # best ranked on the cells, the rest by the linear update alone
+    # every candidate says how it was scored: the accepted one fitted on the cells and its Δχ²
+    # taken on every sample, the best ranked fitted on the cells, the rest by the linear update
     first = doc["selection"][0]
     how = {c["id"]: c["scored_by"] for c in first}
-    assert how["torque_offset"] == "fit on every sample"
-    assert set(how.values()) <= {"fit on every sample", "fit on the cells", "linear update"}
+    assert how["torque_offset"] == "fit on the cells, polished on every sample"
+    assert set(how.values()) <= {"fit on the cells, polished on every sample", "fit on every sample",
+                                 "fit on the cells", "linear update"}
     assert list(how.values()).count("linear update") >= len(how) - 4
     rc = main(["diagnose", str(ROOT / name / "campaign.csv.gz"), "--motor", str(ROOT / name / "motor.toml"),
                "--out", str(tmp_path)])

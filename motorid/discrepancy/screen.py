@@ -204,18 +204,85 @@ class Screen:
         final = self.fit(mechanisms, best.values)
         return final if final.chi2 <= best.chi2 else best
 
+    def _out(self, runs) -> dict:
+        """Per channel: which cells (events) belong to ``runs`` (run indices)."""
+        return {c: np.isin(self._run[c], runs) for c in self.template.cells[0]}
+
+    def fit_without(self, mechanisms, initial: dict, runs) -> CellFit:
+        """The base model plus ``mechanisms`` fitted on the cells of every run but ``runs``."""
+        obs, w = self.template.cells
+        out = self._out(runs)
+        return self.fit(mechanisms, initial, weights={c: np.where(out[c], 0.0, w[c]) for c in obs})
+
+    def _on_runs(self, fit: CellFit, runs) -> Problem:
+        """``fit``'s model and values on the cells of ``runs`` alone."""
+        obs, w = self.template.cells
+        out = self._out(runs)
+        return self._problem(fit.mechanisms, fit.free, {k: v for k, v in fit.values.items() if k not in fit.free},
+                             weights={c: np.where(out[c], w[c], 0.0) for c in obs})
+
+    def chi2_of(self, fit: CellFit, runs) -> float:
+        """χ² of the cells of ``runs`` at ``fit``'s values (a cell's share capped at 25 per sample:
+        a held-out spike counts like an outlier)."""
+        obs = self.template.cells[0]
+        order = [c for c in CHANNELS if c in obs]
+        prob = self._on_runs(fit, runs)
+        r = np.asarray(residual_jit(as_arrays({k: fit.values[k] for k in fit.free}), prob.ctx()))
+        cap = 25.0 * np.concatenate([np.maximum(self.counts[c], 1.0) for c in order])
+        return float(np.sum(np.minimum(np.where(np.isfinite(r), r * r, 0.0), cap)))
+
+    def scatter_of(self, runs) -> float:
+        """The χ² the samples of ``runs`` add about their cell means where the noise model holds
+        (n − 1 per cell of n samples): what a χ² over the cells lacks against one over samples."""
+        return float(sum(np.sum(np.maximum(self.counts[c] - 1.0, 0.0)[m]) for c, m in self._out(runs).items()))
+
+    @staticmethod
+    def information(fit: CellFit, prob: Problem | None = None) -> np.ndarray:
+        """JᵀJ over ``fit.free`` at its values, on ``fit``'s own cells or those of ``prob`` (the
+        noise held at the base fit's: the Fisher information of the free parameters)."""
+        prob = fit.problem if prob is None else prob
+        return np.asarray(normal_equations(as_arrays({k: fit.values[k] for k in fit.free}), prob.ctx())[0])
+
+    @staticmethod
+    def covariance(information: np.ndarray) -> np.ndarray:
+        """(JᵀJ)⁻¹, inverted in unit columns (a scale-free cut-off); ∞ on the diagonal of a
+        parameter JᵀJ does not see; NaN everywhere where JᵀJ is not finite."""
+        F = np.asarray(information, dtype=float)
+        if not np.all(np.isfinite(F)):
+            return np.full(F.shape, np.nan)
+        d = np.sqrt(np.maximum(np.diag(F), 0.0))
+        seen = d > 0
+        cov = np.zeros(F.shape)
+        cov[~seen, ~seen] = np.inf
+        if seen.any():
+            ds = d[seen]
+            cov[np.ix_(seen, seen)] = np.linalg.pinv(F[np.ix_(seen, seen)] / np.outer(ds, ds), rcond=1e-12,
+                                                     hermitian=True) / np.outer(ds, ds)
+        return cov
+
+    def parameter_std(self, fit: CellFit) -> dict:
+        """Standard errors of ``fit``'s free parameters on its own cells → {name: std} (∞: not seen)."""
+        if not fit.free:
+            return {}
+        cov = self.covariance(self.information(fit))
+        return {k: float(np.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(fit.free)}
+
+    def expected_excess(self, fit: CellFit, runs) -> float:
+        """The χ² by which ``fit`` (on a training part of the cells) should predict the cells of
+        ``runs`` worse than a fit that saw them, were its model right: its parameters'
+        uncertainty carried to those cells, tr(C_train · F_runs); ∞ where the training part does
+        not see a parameter those runs depend on."""
+        if not fit.free:
+            return 0.0
+        cov = self.covariance(self.information(fit))
+        F = self.information(fit, self._on_runs(fit, runs))
+        if not np.all(np.isfinite(F)) or np.any(np.isnan(cov)):
+            return np.inf
+        if np.any(np.isinf(np.diag(cov)) & (np.diag(F) > 0)):
+            return np.inf
+        return float(np.sum(np.where(np.isinf(cov), 0.0, cov) * F))
+
     def held_out_chi2(self, mechanisms, initial: dict, folds: list) -> float:
         """χ² of each fold's runs predicted by a fit on the other runs, summed over the folds
-        (a cell's share capped at 25 per sample: a held-out spike counts like an outlier)."""
-        obs, w = self.template.cells
-        order = [c for c in CHANNELS if c in obs]
-        total = 0.0
-        for fold in folds:
-            out = {c: np.isin(self._run[c], fold) for c in order}
-            fit = self.fit(mechanisms, initial, weights={c: np.where(out[c], 0.0, w[c]) for c in order})
-            prob = self._problem(fit.mechanisms, fit.free, {k: v for k, v in fit.values.items() if k not in fit.free},
-                                 weights={c: np.where(out[c], w[c], 0.0) for c in order})
-            r = np.asarray(residual_jit(as_arrays({k: fit.values[k] for k in fit.free}), prob.ctx()))
-            cap = 25.0 * np.concatenate([np.maximum(self.counts[c], 1.0) for c in order])
-            total += float(np.sum(np.minimum(np.where(np.isfinite(r), r * r, 0.0), cap)))
-        return total
+        (:meth:`chi2_of`)."""
+        return sum(self.chi2_of(self.fit_without(mechanisms, initial, fold), fold) for fold in folds)

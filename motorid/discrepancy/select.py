@@ -9,12 +9,15 @@ Forward selection over the catalog (the registry of mechanisms, :mod:`motorid.ph
    data (:mod:`motorid.discrepancy.screen`: cell means of a coarse shaft-angle
    grid, no per-sample work): every candidate ranked by the χ² a Gauss-Newton
    update on the cells' normal equations predicts (no fit), the best ranked
-   fitted on the cells, the finalist then refitted on every sample;
+   fitted on the cells, the finalist's residuals then taken on every sample (two
+   finalists too close to call on the cells are refitted there);
 3. score each by evidence that punishes extra parameters,
    ΔBIC = Δχ² − k ln N (k extra parameters, N residuals), and the best few by
    the χ² of runs held out of the fit (K-fold over runs, on the same cells);
-4. keep the best if ΔBIC exceeds ``min_evidence``, the held-out error falls
-   and it removes some located structure; repeat while structure remains;
+4. keep the best if ΔBIC exceeds ``min_evidence``, the held-out error falls,
+   it removes some located structure and it predicts the operating regions it
+   was not fitted on (:func:`~motorid.discrepancy.unexplained.extrapolation_check`,
+   on the cells; ``check_regions``); repeat while structure remains;
 5. refit the final model (noise re-estimated) and report what is left
    unexplained in words — never forcing a name on it.
 """
@@ -34,6 +37,11 @@ from motorid.identify.types import FitOptions, FitResult
 from motorid.physics.registry import all_mechanisms
 
 
+#: how a finalist was scored: fitted on the cells, polished and its Δχ² taken on every sample
+#: (:func:`on_every_sample`)
+EVALUATED = "fit on the cells, polished on every sample"
+
+
 @dataclass
 class Candidate:
     mechanism: object
@@ -42,7 +50,8 @@ class Candidate:
     delta_bic: float
     cv_gain: float | None = None  # held-out χ² of the current model minus this one's
     removed: list = field(default_factory=list)  # structures it explains
-    scored_by: str = "fit on the cells"  # or "linear update" (ranked, not fitted), "fit on every sample"
+    # or "linear update" (ranked, not fitted), EVALUATED (a finalist), "fit on every sample" (a close call)
+    scored_by: str = "fit on the cells"
 
 
 @dataclass
@@ -212,6 +221,8 @@ def _refit_in_full(cands: list, dataset, spec, current_mechs, noise, inliers, cu
     """Replace the screened numbers of ``cands`` by those of a fit on every sample."""
     for cand in cands:
         full = _full_fit(dataset, spec, current_mechs + [cand.mechanism], noise, inliers, cand.fit.params_all)
+        if isinstance(cand.fit, CellFit):
+            cand.cells = cand.fit
         cand.screened = (cand.delta_chi2, cand.delta_bic)
         cand.fit = full
         cand.scored_by = "fit on every sample"
@@ -220,9 +231,32 @@ def _refit_in_full(cands: list, dataset, spec, current_mechs, noise, inliers, cu
         cand.delta_bic = cand.delta_chi2 - k * np.log(n_res)
 
 
+def on_every_sample(cells, dataset, spec, mechanisms, noise, inliers) -> FitResult:
+    """A model fitted on the screening cells, polished on every sample by the Gauss-Newton steps
+    that lower χ² there (no Levenberg-Marquardt, no noise rounds, no uncertainty): what
+    :func:`locate` then searches.  The coarse cells average the shaft-angle ripple that the
+    model takes at their mean angle, so their optimum is a few per cent off the samples' in
+    K_L's harmonics; a step or two of the (nearly linear) problem puts it right."""
+    return fit_least_squares(dataset, spec, mechanisms,
+                             FitOptions(fixed_noise=noise, fixed_inliers=inliers, solve="gauss-newton",
+                                        uncertainty=False), initial=cells.params_all)
+
+
+def _on_every_sample(cand, dataset, spec, current_mechs, noise, inliers, ref, n_res) -> None:
+    """The candidate's residuals on every sample (:func:`on_every_sample`) and its Δχ² there
+    against ``ref``."""
+    cells = cand.fit
+    full = on_every_sample(cells, dataset, spec, current_mechs + [cand.mechanism], noise, inliers)
+    cand.cells, cand.screened, cand.fit = cells, (cand.delta_chi2, cand.delta_bic), full
+    cand.scored_by = EVALUATED
+    cand.delta_chi2 = ref.chi2 - full.chi2
+    k = sum(1 for p in cand.mechanism.parameters if p in cells.free)
+    cand.delta_bic = cand.delta_chi2 - k * np.log(n_res)
+
+
 def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
              alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 3, cv_top: int = 1,
-             max_mechanisms: int = 3, progress=None, check_regions: bool = False,
+             max_mechanisms: int = 3, progress=None, check_regions: bool = True,
              screen_bins_per_pitch: int = SCREEN_BINS_PER_PITCH) -> Diagnosis:
     """Find, name and model what the base model leaves out (see module doc).
 
@@ -259,7 +293,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     screen = Screen(dataset, spec, base, screen_bins_per_pitch) if loc.significant else None
     current_cells = screen.fit([], base.params_all) if screen is not None else None
     current_cv = None
-    reference = None
+    reference = polished = None
     lap("screening cells")
     while loc.significant and len(accepted) < max_mechanisms:
         channels = {s.channel for s in loc.significant}
@@ -269,16 +303,17 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         lap("candidates on the cells")
         if not scored:
             break
-        if current is base and reference is None:
-            # the base model refitted like the candidates (noise and inliers held, from its optimum):
-            # the reference of their Δχ² on every sample, so that no candidate is credited with
-            # what further steps of the base fit itself would have found (a parameter creeping
-            # toward its bound)
-            reference = _full_fit(dataset, spec, [], noise, inliers, base.params_all)
-            if reference.chi2 > base.chi2:
-                reference = base
-        ref = reference if current is base else current
+        ref = current
         if _near_tie(scored, min_evidence):  # the coarse cells must not decide a close call
+            if current is base and reference is None:
+                # the base model refitted like the candidates (noise and inliers held, from its
+                # optimum): the reference of their Δχ² on every sample, so that no candidate is
+                # credited with what further steps of the base fit itself would have found (a
+                # parameter creeping toward its bound)
+                reference = _full_fit(dataset, spec, [], noise, inliers, base.params_all)
+                if reference.chi2 > base.chi2:
+                    reference = base
+            ref = reference if current is base else current
             _refit_in_full(scored[:2], dataset, spec, current_mechs, noise, inliers, ref, n_res)
             scored[:2] = sorted(scored[:2], key=lambda c: -c.delta_bic)
             lap("finalists on every sample")
@@ -302,10 +337,16 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
                 lap("held-out runs on the cells")
                 if cand.cv_gain <= 0:
                     continue
-            cells = cand.fit if isinstance(cand.fit, CellFit) else None
-            if cells is not None:
-                _refit_in_full([cand], dataset, spec, current_mechs, noise, inliers, ref, n_res)
-                cand.cells = cells
+            if isinstance(cand.fit, CellFit):
+                if current is base and polished is None:
+                    # the base model polished alike (from its cells' optimum): the reference of the
+                    # finalists' Δχ², so that none is credited with what further steps of the base
+                    # fit itself find (a parameter creeping toward its bound)
+                    polished = on_every_sample(current_cells, dataset, spec, [], noise, inliers)
+                    if polished.chi2 > base.chi2:
+                        polished = base
+                _on_every_sample(cand, dataset, spec, current_mechs, noise, inliers,
+                                 polished if current is base else current, n_res)
             lap("finalists on every sample")
             after = locate(cand.fit, dataset, spec, alpha=alpha, min_effect=min_effect)
             lap("locate structure (finalists)")
@@ -318,8 +359,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
                 best = cand
                 break
         if best is not None and check_regions:  # issue 15: a name must also predict where it was not fitted
-            best.extrapolation = extrapolation_check(dataset, spec, current_mechs + [best.mechanism], noise,
-                                                     inliers, best.fit)
+            best.extrapolation = extrapolation_check(screen, current_mechs + [best.mechanism], best.cells)
+            lap("operating regions on the cells")
             if not best.extrapolation["passed"]:
                 say(f"refused {best.mechanism.id}: it does not predict the operating regions it was not fitted on")
                 refused.append({"id": best.mechanism.id, "why": "fails where it was not fitted (stand-in)",

@@ -24,7 +24,7 @@ from motorid.identify.covariance import breakaway_sandwich, covariance_from_norm
 from motorid.identify.identifiability import coverage_reasons
 from motorid.identify.noise import breakaway_noise, floor_noise, initial_noise, residual_noise, spikiness
 from motorid.identify.problem import Problem
-from motorid.identify.solver import backend_for, solve
+from motorid.identify.solver import backend_for, gauss_newton_start, solve
 from motorid.identify.types import RUNNING_CHANNELS, FitOptions, FitResult
 from motorid.robust import robust_std
 
@@ -214,6 +214,9 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     # rounds: solve, then re-estimate the noise levels and outliers from the residuals
     steps_total, converged = 0, True
     rounds = 0 if (opt.fixed_noise is not None and opt.fixed_inliers is not None) else opt.rounds
+    if opt.solve not in ("levenberg-marquardt", "gauss-newton") or (opt.solve == "gauss-newton" and rounds):
+        raise ValueError(f"FitOptions(solve={opt.solve!r}): 'levenberg-marquardt', or 'gauss-newton' with "
+                         "fixed_noise and fixed_inliers")
     for round_ in range(rounds):
         problem.set_cells(noise.inliers, noise.runs, noise.breakaway)
         values, steps, converged, free, reasons = solve(problem, values, free, reasons, opt, first=(round_ == 0))
@@ -224,8 +227,11 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
             break
     # final solve with the settled noise and inliers
     problem.set_cells(noise.inliers, noise.runs, noise.breakaway)
-    values, steps, converged, free, reasons = solve(problem, values, free, reasons, opt, first=rounds == 0)
-    steps_total += steps
+    if opt.solve == "gauss-newton":
+        values, free = gauss_newton_start(problem, values, free, reasons, opt)
+    else:
+        values, steps, converged, free, reasons = solve(problem, values, free, reasons, opt, first=rounds == 0)
+        steps_total += steps
     if not converged:
         warnings.append("Levenberg-Marquardt stopped at max_steps before converging; raise FitOptions.max_steps")
 

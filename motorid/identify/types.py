@@ -259,6 +259,10 @@ class FitOptions:
     viscosity_error: bool = True
     # standard errors at all (a candidate screened by diagnose needs only its χ²)
     uncertainty: bool = True
+    # "levenberg-marquardt": the fit; "gauss-newton" (with fixed_noise and fixed_inliers): only the
+    # Gauss-Newton steps from ``initial`` that lower χ², a polish of a model fitted elsewhere
+    # (diagnose's screening cells) on every sample
+    solve: str = "levenberg-marquardt"
 
 
 @dataclass
