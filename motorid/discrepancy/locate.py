@@ -302,7 +302,7 @@ def _harmonic_fits(theta, z, kmax: int):
     angle structure): z − z̄ ≈ a (cos kθ − mean) + b (sin kθ − mean) → [(k, (a, b), Σ fit²)].
     All orders at once from the 2×2 normal equations of each (the same numbers as one
     least-squares solve per order)."""
-    e = np.exp(1j * np.outer(theta, np.arange(1, kmax + 1)))  # n × K
+    e = np.cumprod(np.broadcast_to(np.exp(1j * theta)[:, None], (theta.size, kmax)), axis=1)  # e^{ikθ}: n × K
     c, s = e.real - e.real.mean(axis=0), e.imag - e.imag.mean(axis=0)
     y = z - z.mean()
     cc, ss, cs = np.sum(c * c, axis=0), np.sum(s * s, axis=0), np.sum(c * s, axis=0)
@@ -329,9 +329,12 @@ def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec, speed_groups
     zamp_k = [[] for _ in range(kmax + 1)]  # the same over the run's noise level
     run_k = [[] for _ in range(kmax + 1)]
     stat_t, dof_t, trend = 0.0, 0, []
+    order = np.argsort(run_of, kind="stable")  # each run's samples in time order, found once
+    bounds = np.searchsorted(run_of[order], np.arange(n_runs + 1))
     for r in range(n_runs):
-        sel = (run_of == r) & ok
-        n = int(sel.sum())
+        sel = order[bounds[r]:bounds[r + 1]]
+        sel = sel[ok[sel]]
+        n = int(sel.size)
         if n < 30:
             continue
         zr, th, tr = z[sel], theta[sel], t[sel]

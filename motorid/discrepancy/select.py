@@ -32,6 +32,7 @@ import numpy as np
 from motorid._aot import cached_jit
 from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
 from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen
+from motorid.discrepancy.unexplained import extrapolation_check
 from motorid.identify.least_squares import fit_least_squares
 from motorid.identify.types import FitOptions, FitResult
 from motorid.physics.registry import all_mechanisms
@@ -161,6 +162,9 @@ def _zeros_shown_to_wander(dataset) -> bool:
         return False
 
 
+#: candidates tried after the best is refused by the region check, per selection step (a refused
+#: name is asked again in the next step, with what was kept in the model)
+REGION_TRIES = 2
 #: candidates fitted on the cells after the linear-update ranking: at least this many ...
 SCREEN_FIT_AT_LEAST = 3
 #: ... and every one whose predicted Δχ² reaches this share of the best prediction
@@ -254,6 +258,34 @@ def _on_every_sample(cand, dataset, spec, current_mechs, noise, inliers, ref, n_
     cand.delta_bic = cand.delta_chi2 - k * np.log(n_res)
 
 
+def _recheck_provisional(accepted, screen, cells, dataset, spec, noise, inliers, base, refused, say):
+    """Ask the region check again of each name kept while structure was left, now with every
+    other name in the model (:func:`extrapolation_check` on the final cells fit).  The first that
+    still fails is refused, and every name kept after it too: they were chosen with a stand-in in
+    the model → (accepted, current fit, whether any was cut)."""
+    mechs = [c.mechanism for c in accepted]
+    for i, cand in enumerate(accepted):
+        if not getattr(cand, "provisional", False):
+            continue
+        others = [m for m in mechs if m is not cand.mechanism]
+        check = extrapolation_check(screen, others + [cand.mechanism], cells)
+        cand.extrapolation = {**check, "with_the_final_model": True}
+        if check["passed"]:
+            continue
+        say(f"refused {cand.mechanism.id}: with every other name in the model it still does not predict the "
+            "operating regions it was not fitted on")
+        refused.append({"id": cand.mechanism.id, "why": "fails where it was not fitted (stand-in), also with "
+                        "every other name in the model", "extrapolation": cand.extrapolation})
+        for later in accepted[i + 1:]:
+            refused.append({"id": later.mechanism.id, "why": f"chosen after {cand.mechanism.id}, a refused "
+                            "stand-in, was in the model", "extrapolation": getattr(later, "extrapolation", None)})
+        kept = accepted[:i]
+        if not kept:
+            return [], base, True
+        return kept, kept[-1].fit, True
+    return accepted, accepted[-1].fit, False
+
+
 def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
              alpha: float = 1e-3, min_effect: float = 0.3, folds: int = 3, cv_top: int = 1,
              max_mechanisms: int = 3, progress=None, check_regions: bool = True,
@@ -262,7 +294,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
 
     Candidates are screened on the reduced data (:mod:`motorid.discrepancy.screen`); only the
     finalist (the two best where they come close) is refitted on every sample."""
-    from motorid.discrepancy.unexplained import extrapolation_check, unexplained_entries
+    from motorid.discrepancy.unexplained import unexplained_entries
 
     say = progress or (lambda msg: None)
     seconds: dict = {}
@@ -326,7 +358,10 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
             current_cv = screen.held_out_chi2(current_mechs, current_cells.params_all, fold_runs)
             lap("held-out runs on the cells")
         best = None
-        for cand in scored[:cv_top]:
+        limit = cv_top
+        for i, cand in enumerate(scored):
+            if i >= limit:
+                break
             if cand.delta_bic <= min_evidence or cand.fit is None:
                 continue
             if folds > 1:
@@ -354,18 +389,26 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
             after_keys = {_structure_key(s) for s in after.significant}
             removed = [s for s in loc.significant if _structure_key(s) in before_keys - after_keys]
             if cand.delta_bic > min_evidence and (removed or len(after.significant) < len(loc.significant)):
+                if check_regions:  # issue 15: a name must also predict where it was not fitted
+                    cand.extrapolation = extrapolation_check(screen, current_mechs + [cand.mechanism], cand.cells)
+                    lap("operating regions on the cells")
+                    if not cand.extrapolation["passed"] and after.significant:
+                        # structure is left: a second effect still missing may be what spoils the
+                        # splits; kept for now and asked again with the final model (below)
+                        cand.provisional = True
+                    elif not cand.extrapolation["passed"]:
+                        say(f"refused {cand.mechanism.id}: it does not predict the operating regions it was not "
+                            "fitted on")
+                        refused.append({"id": cand.mechanism.id, "why": "fails where it was not fitted (stand-in)",
+                                        "extrapolation": cand.extrapolation})
+                        # the next ranked may be a second effect that made this one fail: it is tried, and
+                        # this one is asked again once that is in the model
+                        limit = min(limit + 1, cv_top + REGION_TRIES)
+                        continue
                 cand.removed = removed
                 cand.location = after
                 best = cand
                 break
-        if best is not None and check_regions:  # issue 15: a name must also predict where it was not fitted
-            best.extrapolation = extrapolation_check(screen, current_mechs + [best.mechanism], best.cells)
-            lap("operating regions on the cells")
-            if not best.extrapolation["passed"]:
-                say(f"refused {best.mechanism.id}: it does not predict the operating regions it was not fitted on")
-                refused.append({"id": best.mechanism.id, "why": "fails where it was not fitted (stand-in)",
-                                "extrapolation": best.extrapolation})
-                best = None
         steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
                        "cv_gain": c.cv_gain, "accepted": c is best,
                        "screened_delta_chi2": getattr(c, "screened", (c.delta_chi2,))[0],
@@ -381,6 +424,16 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         current_cv = getattr(best, "cv", None)
         loc = best.location
         lap("candidates on the cells")
+    if check_regions and any(getattr(c, "provisional", False) for c in accepted):
+        accepted, current, cut = _recheck_provisional(accepted, screen, current_cells, dataset, spec, noise,
+                                                      inliers, base, refused, say)
+        current_mechs = [c.mechanism for c in accepted]
+        if cut:
+            loc = accepted[-1].location if accepted else loc0
+        lap("operating regions on the cells")
+    # a name refused while a second effect was still missing, kept once that was in the model
+    kept = {c.mechanism.id for c in accepted}
+    refused = list({r["id"]: r for r in refused if r["id"] not in kept}.values())  # asked twice: the last word
     # final model with its own noise estimate
     lap("selection bookkeeping")
     final = fit_least_squares(dataset, spec, current_mechs, initial=current.params_all) if accepted else base

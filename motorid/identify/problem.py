@@ -8,6 +8,7 @@ evaluate the same thing: the model (:func:`motorid.model.predict`,
 
 from __future__ import annotations
 
+import weakref
 from typing import NamedTuple
 
 import jax
@@ -111,6 +112,27 @@ def pad_samples(s: Samples, size: int) -> Samples:
     ])
 
 
+#: the padded running samples of each dataset, shared by every Problem made from it (diagnose
+#: makes several: base fit, screening cells, finalists, final fit; each copy is ~20 MB per
+#: 100 k rows).  Keyed by id (a Dataset is not hashable), dropped with the dataset.
+_PADDED: dict = {}
+
+
+def _padded_running(data, size: int) -> Samples:
+    """``pad_samples(data.running, size)``, made once per dataset (and running samples)."""
+    key = id(data)
+    cached = _PADDED.get(key)
+    if cached is not None and cached[0]() is data and cached[1] is data.running and cached[2] == size:
+        return cached[3]
+    padded = pad_samples(data.running, size)
+    try:
+        ref = weakref.ref(data, lambda _, k=key: _PADDED.pop(k, None))
+    except TypeError:  # not weakly referenceable: no sharing
+        return padded
+    _PADDED[key] = (ref, data.running, size, padded)
+    return padded
+
+
 def pad(x, size: int, value: float = 0.0):
     x = np.asarray(x, dtype=float)
     return np.concatenate([x, np.full(size - x.size, value)])
@@ -185,7 +207,7 @@ class Problem:
                 means = means._replace(viscosity=np.where(inv > 0, 1.0 / inv, means.viscosity))
             self.cell_samples = pad_samples(means, self.cell_size)
             self.n_samples = int(self.run_of.size)
-            self.running_padded = pad_samples(data.running, bucket(self.n_samples))
+            self.running_padded = _padded_running(data, bucket(self.n_samples))
         if self.has_events:
             self.n_events = int(self.held_torque.size)
             self.events_padded = pad_samples(data.events, bucket(self.n_events, 16))
