@@ -270,6 +270,8 @@ def _recheck_provisional(accepted, screen, cells, dataset, spec, noise, inliers,
         others = [m for m in mechs if m is not cand.mechanism]
         check = extrapolation_check(screen, others + [cand.mechanism], cells)
         cand.extrapolation = {**check, "with_the_final_model": True}
+        if hasattr(cand, "step_entry"):
+            cand.step_entry["extrapolation"] = cand.extrapolation
         if check["passed"]:
             continue
         say(f"refused {cand.mechanism.id}: with every other name in the model it still does not predict the "
@@ -416,6 +418,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
                        "extrapolation": getattr(c, "extrapolation", None)} for c in scored])
         if best is None:
             break
+        best.step_entry = next(e for e in steps[-1] if e["accepted"])  # the recheck writes its verdict there
+        best.step_entry["provisional"] = bool(getattr(best, "provisional", False))
         say(f"kept {best.mechanism.id} (ΔBIC {best.delta_bic:.1f})")
         accepted.append(best)
         current_mechs.append(best.mechanism)
