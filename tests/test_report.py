@@ -328,3 +328,22 @@ def test_report_renders_in_headless_chromium(fitted, tmp_path):
     img = np.asarray(Image.open(shot).convert("L"), dtype=float)
     assert img.shape[0] >= 4000
     assert (img < 200).mean() > 0.03 and img.std() > 20  # text, tables and plots, not a blank page
+
+
+def test_refused_stand_ins_are_said_with_their_own_reason():
+    """Each refused name is said with why: the splits it failed, a name dropped because it was
+    chosen after a stand-in, a channel whose zeros wander — never an empty list of splits."""
+    from motorid.report.causes import refused_words
+
+    html = refused_words([
+        {"id": "case_pressure_friction", "why": "fails where it was not fitted (stand-in)",
+         "extrapolation": {"splits": [{"split": "fit on oil temperature above 40 °C, predict oil temperature up "
+                                                "to 40 °C", "failed": True}, {"split": "other", "failed": False}]}},
+        {"id": "film_heating", "why": "chosen after case_pressure_friction, a refused stand-in, was in the model",
+         "extrapolation": None},
+        {"id": "any mechanism on torque", "why": "per-run zero offsets", "extrapolation": None},
+    ])
+    assert html.count("<li>") == 3
+    assert "predict oil temperature up to 40 °C)" in html and "other" not in html
+    assert "chosen after case_pressure_friction" in html and "per-run zero offsets</li>" in html
+    assert "()" not in html

@@ -36,6 +36,8 @@ def refused_words(refused) -> str:
         if not isinstance(r, dict):
             continue
         failed = [s["split"] for s in (r.get("extrapolation") or {}).get("splits", []) if s.get("failed")]
-        items.append(f"<li><code>{esc(str(r.get('id')))}</code> fitted the logs but was not kept as a name: it "
-                     f"fails where it was not fitted ({esc('; '.join(failed))})</li>")
+        why = str(r.get("why") or "fails where it was not fitted")
+        where = f" ({'; '.join(failed)})" if failed else ""
+        items.append(f"<li><code>{esc(str(r.get('id')))}</code> fitted the logs but was not kept as a name: "
+                     f"{esc(why + where)}</li>")
     return "<p>Stand-ins refused:</p><ul>" + "".join(items) + "</ul>" if items else ""
