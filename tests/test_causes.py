@@ -161,6 +161,9 @@ def test_a_law_in_no_catalog_is_left_unexplained_with_an_empirical_term_not_a_st
     failed = [s for s in refused["extrapolation"]["splits"] if s["failed"]]
     assert failed and all(s["determined"] for s in failed)  # refused where the half determines it
     assert refused["extrapolation"]["with_the_final_model"] is True
+    kept_then_refused = [c for step in doc["selection"] for c in step if c.get("refused_after_recheck")]
+    assert [c["id"] for c in kept_then_refused] == ["case_pressure_friction"]
+    assert not any(c["accepted"] for step in doc["selection"] for c in step)  # the record agrees
     # its excess is far beyond what the training half's uncertainty explains
     assert all(s["excess"] > 10 * s["expected_excess"] for s in failed)
     torque = [u for u in doc["unexplained"] if u["channel"] == "torque"]

@@ -281,6 +281,10 @@ def _recheck_provisional(accepted, screen, cells, dataset, spec, noise, inliers,
         for later in accepted[i + 1:]:
             refused.append({"id": later.mechanism.id, "why": f"chosen after {cand.mechanism.id}, a refused "
                             "stand-in, was in the model", "extrapolation": getattr(later, "extrapolation", None)})
+        for dropped in accepted[i:]:  # the selection record says it was kept, then refused
+            if hasattr(dropped, "step_entry"):
+                dropped.step_entry["accepted"] = False
+                dropped.step_entry["refused_after_recheck"] = True
         kept = accepted[:i]
         if not kept:
             return [], base, True
