@@ -18,6 +18,7 @@ cells' weights, their χ² then taken at the fitted values.
 from __future__ import annotations
 
 import copy
+import functools
 import itertools
 from dataclasses import dataclass, replace
 
@@ -56,6 +57,11 @@ class CellFit:
     @property
     def params_all(self) -> dict:
         return self.values
+
+    @functools.cached_property
+    def covariance(self) -> np.ndarray:
+        """(JᵀJ)⁻¹ over ``free`` on its own cells (:meth:`Screen.covariance`), made once."""
+        return Screen.covariance(Screen.information(self))
 
 
 def gauss_newton_chi2(JtJ, Jtr, rr: float, x0, positive, hold=None, rcond: float = 1e-10) -> float:
@@ -264,7 +270,7 @@ class Screen:
         """Standard errors of ``fit``'s free parameters on its own cells → {name: std} (∞: not seen)."""
         if not fit.free:
             return {}
-        cov = self.covariance(self.information(fit))
+        cov = fit.covariance
         return {k: float(np.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(fit.free)}
 
     def expected_excess(self, fit: CellFit, runs) -> float:
@@ -274,7 +280,7 @@ class Screen:
         not see a parameter those runs depend on."""
         if not fit.free:
             return 0.0
-        cov = self.covariance(self.information(fit))
+        cov = fit.covariance
         F = self.information(fit, self._on_runs(fit, runs))
         if not np.all(np.isfinite(F)) or np.any(np.isnan(cov)):
             return np.inf

@@ -258,11 +258,11 @@ def _on_every_sample(cand, dataset, spec, current_mechs, noise, inliers, ref, n_
     cand.delta_bic = cand.delta_chi2 - k * np.log(n_res)
 
 
-def _recheck_provisional(accepted, screen, cells, dataset, spec, noise, inliers, base, refused, say):
+def _recheck_provisional(accepted, screen, cells, base, refused, say):
     """Ask the region check again of each name kept while structure was left, now with every
     other name in the model (:func:`extrapolation_check` on the final cells fit).  The first that
     still fails is refused, and every name kept after it too: they were chosen with a stand-in in
-    the model → (accepted, current fit, whether any was cut)."""
+    the model → (accepted, current fit)."""
     mechs = [c.mechanism for c in accepted]
     for i, cand in enumerate(accepted):
         if not getattr(cand, "provisional", False):
@@ -286,10 +286,8 @@ def _recheck_provisional(accepted, screen, cells, dataset, spec, noise, inliers,
                 dropped.step_entry["accepted"] = False
                 dropped.step_entry["refused_after_recheck"] = True
         kept = accepted[:i]
-        if not kept:
-            return [], base, True
-        return kept, kept[-1].fit, True
-    return accepted, accepted[-1].fit, False
+        return kept, kept[-1].fit if kept else base
+    return accepted, accepted[-1].fit
 
 
 def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_evidence: float = 10.0,
@@ -299,7 +297,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     """Find, name and model what the base model leaves out (see module doc).
 
     Candidates are screened on the reduced data (:mod:`motorid.discrepancy.screen`); only the
-    finalist (the two best where they come close) is refitted on every sample."""
+    finalist is taken to every sample (polished, :func:`on_every_sample`; the two best are
+    refitted there where they come close)."""
     from motorid.discrepancy.unexplained import unexplained_entries
 
     say = progress or (lambda msg: None)
@@ -433,11 +432,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         loc = best.location
         lap("candidates on the cells")
     if check_regions and any(getattr(c, "provisional", False) for c in accepted):
-        accepted, current, cut = _recheck_provisional(accepted, screen, current_cells, dataset, spec, noise,
-                                                      inliers, base, refused, say)
+        accepted, current = _recheck_provisional(accepted, screen, current_cells, base, refused, say)
         current_mechs = [c.mechanism for c in accepted]
-        if cut:
-            loc = accepted[-1].location if accepted else loc0
         lap("operating regions on the cells")
     # a name refused while a second effect was still missing, kept once that was in the model
     kept = {c.mechanism.id for c in accepted}

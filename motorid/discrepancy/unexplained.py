@@ -90,8 +90,8 @@ def extrapolation_check(screen, mechanisms, cells_fit) -> dict:
     ``mechanisms`` (the candidate's and those named before it).
     Returns ``{"passed": bool, "splits": [{split, held_out_chi2, all_runs_chi2, excess, determined,
     failed}]}``: χ² of the predicted half's samples (its cells plus the scatter of the samples
-    about them, :meth:`Screen.scatter_of`); a split whose training half does not determine the
-    candidate's parameters does not count.
+    about them, :meth:`Screen.scatter_of`); a split whose training half does not determine those
+    parameters does not count.
     """
     splits, passed = [], True
     for (low_words, high_words), run_low in region_masks(screen.dataset).items():
