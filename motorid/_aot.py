@@ -145,6 +145,20 @@ def _save(path: Path, compiled, hlo_text: str) -> None:
         pass
 
 
+def _trim_heap() -> None:
+    """Return freed heap pages to the system (glibc's ``malloc_trim``; elsewhere nothing): the
+    executables of XLA are freed into the C heap, which keeps them resident otherwise."""
+    import ctypes
+    import ctypes.util
+    import gc
+
+    gc.collect()
+    try:
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
 class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
     """``equinox.filter_jit`` whose compiled programs persist across processes (module docstring)."""
 
@@ -154,6 +168,7 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
         self.fun = fun
         self.name = f"{fun.__module__}.{fun.__qualname__}"
         self._memory: dict = {}
+        self._files: dict = {}  # key → its file on disk, where it has one
         cached_jit._instances.append(self)
         self.__wrapped__ = fun
         self.__doc__ = fun.__doc__
@@ -197,6 +212,21 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
                 dropped += 1
         return dropped
 
+    @classmethod
+    def release_all(cls) -> int:
+        """Drop from memory every compiled program that is kept on disk, and hand the freed heap
+        back to the system (each executable holds a few MB; a later call loads it from disk
+        again, in milliseconds; a program only in memory stays, as compiling it again would
+        cost seconds) → how many were dropped."""
+        dropped = 0
+        for inst in cls._instances:
+            for key in [k for k in inst._memory if k in inst._files and inst._files[k].exists()]:
+                del inst._memory[key]
+                dropped += 1
+        if dropped:
+            _trim_heap()
+        return dropped
+
     def _call_flat(self, dyn, leaves, dynamic, treedef):
         full = list(leaves)
         for i, x in zip(dynamic, dyn):
@@ -213,6 +243,7 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
         if folder is not None:
             digest = hashlib.sha256(text.encode()).hexdigest()[:40]
             path = folder / f"{self.fun.__name__}-{digest}.bin"
+            self._files[key] = path
             if path.exists():
                 loaded = _load(path)
                 if loaded is not None:

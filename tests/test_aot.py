@@ -82,3 +82,33 @@ def test_static_object_of_a_foreign_class_is_not_kept_on_disk(tmp_path, monkeypa
     assert len(list(tmp_path.rglob("f-*.bin"))) == 1
 
 
+
+
+def test_release_all_drops_only_what_the_disk_keeps(tmp_path, monkeypatch):
+    """Diagnose frees its programs between steps: a program kept on disk is dropped from memory
+    and loads again with the same numbers; one that exists only in memory (compiling it again
+    would cost seconds) is kept."""
+    from motorid import _aot
+
+    class Setting:  # a foreign static object: never on disk
+        def __repr__(self):
+            return "<setting>"
+
+    monkeypatch.setattr(_aot._jaxconfig, "CACHE_DIR", str(tmp_path))
+    traces = []
+
+    def f(x, k):
+        traces.append(1)
+        # a program no other test compiles: XLA shares the kernels of identical programs within a
+        # process, and an executable whose kernels came from elsewhere does not serialize whole
+        return np.float64(0.7318) * x**3 - x * np.float64(1.9134)
+
+    g = _aot.cached_jit(f)
+    x = np.arange(5.0)
+    first = np.asarray(g(x, "on disk"))
+    g(x, Setting())
+    assert len(g._memory) == 2 and len(traces) == 2
+    assert _aot.cached_jit.release_all() >= 1
+    assert len(g._memory) == 1  # the memory-only program stays
+    np.testing.assert_array_equal(np.asarray(g(x, "on disk")), first)
+    assert len(traces) == 2  # loaded from disk, not traced again

@@ -160,3 +160,19 @@ def test_covariance_from_the_normal_matrix_inverts_it_over_columns_of_any_scale(
     cs = covariance_from_normal(Js.T @ Js)
     assert np.all(np.isfinite(cs))
     np.testing.assert_allclose(cs @ np.array([1.0, -1.0]), 0.0, atol=1e-12)
+
+
+def test_viscosity_sensitivity_block_by_block_equals_the_whole_jacobian():
+    """The fallback's ∂r/∂β·∂r/∂μ and ∂r/∂μ, computed over blocks of cells, equal the
+    program over every cell at once."""
+    frame, spec, _ = simulated(seed=5)
+    data = extract(frame, spec)
+    ls = fit_least_squares(data, spec)
+    problem = ls.problem
+    problem.expansion = None  # the fallback: a Jacobian program over the cells
+    values = {k: ls.values[k] for k in ls.free}
+    whole, g_whole = viscosity_jacobians(problem, values, problem.ctx()._replace(block=problem.cell_size))
+    parts, g_parts = viscosity_jacobians(problem, values, problem.ctx()._replace(block=problem.cell_size // 8))
+    np.testing.assert_allclose(parts, whole, rtol=1e-11, atol=1e-12 * np.abs(whole).max())
+    for c in g_whole:
+        np.testing.assert_allclose(g_parts[c], g_whole[c], rtol=1e-11, atol=1e-12 * np.abs(g_whole[c]).max())

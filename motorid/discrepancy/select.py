@@ -306,6 +306,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     clock = [time.perf_counter()]
 
     def lap(step: str) -> None:
+        cached_jit.release_all()
         now = time.perf_counter()
         seconds[step] = seconds.get(step, 0.0) + now - clock[0]
         clock[0] = now

@@ -13,7 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from motorid._aot import cached_jit
-from motorid.identify.problem import Ctx, Problem, as_arrays, normal_equations, pad, predictions_jit, weighted_residual
+from motorid.identify.problem import (Ctx, Problem, as_arrays, normal_equations, over_cell_blocks, pad, predictions_jit,
+                                      weighted_residual)
 from motorid.identify.types import BREAKAWAY_ONLY, CHANNELS, RUNNING_CHANNELS, FitResult
 
 
@@ -81,17 +82,27 @@ def breakaway_sandwich(problem: Problem, values: dict, cov: np.ndarray, residual
 
 @cached_jit
 def _viscosity_sensitivity(values: dict, ctx: Ctx):
-    """∂r/∂β (rows × free) and ∂r/∂μ (rows) of the weighted residual of the cells,
-    r = w·(observed − predicted), μ the cells' viscosity (each cell's prediction
-    depends on its own viscosity only, so one tangent of ones gives every cell's)."""
-    jac = jax.jacfwd(weighted_residual)(values, ctx)
-    J = jnp.stack([jac[k] for k in ctx.free], axis=1)
+    """(Σ_c (∂r_c/∂β)(∂r_c/∂μ), cells × free; ∂r_c/∂μ, channels × cells) of the weighted
+    residual of the running cells, r_c = w·(observed − predicted) in the order of
+    ``ctx.observed``, μ the cells' viscosity (each cell's prediction depends on its own
+    viscosity only, so one tangent of ones gives every cell's); block by block, so that no
+    Jacobian over every cell is held (:func:`~motorid.identify.problem.over_cell_blocks`)."""
 
-    def of_viscosity(mu):
-        return weighted_residual(values, ctx._replace(running=ctx.running._replace(viscosity=mu)))
+    def block(c):
+        jac = jax.jacfwd(weighted_residual)(values, c)
+        J = jnp.stack([jac[k] for k in c.free], axis=1)
 
-    mu = ctx.running.viscosity
-    return J, jax.jvp(of_viscosity, (mu,), (jnp.ones_like(mu),))[1]
+        def of_viscosity(mu):
+            return weighted_residual(values, c._replace(running=c.running._replace(viscosity=mu)))
+
+        mu = c.running.viscosity
+        g = jax.jvp(of_viscosity, (mu,), (jnp.ones_like(mu),))[1]
+        k = len(c.observed)
+        J, g = J.reshape(k, -1, J.shape[1]), g.reshape(k, -1)
+        return jnp.sum(J * g[:, :, None], axis=0), g
+
+    Jg, g = over_cell_blocks(block, ctx)  # (blocks, size, free), (blocks, channels, size)
+    return Jg.reshape(-1, Jg.shape[-1]), jnp.moveaxis(g, 1, 0).reshape(g.shape[1], -1)
 
 
 def viscosity_jacobians(problem: Problem, values: dict, ctx: Ctx):
@@ -107,11 +118,9 @@ def viscosity_jacobians(problem: Problem, values: dict, ctx: Ctx):
     exp = problem.expansion
     free = list(ctx.free)
     if exp is None or problem.expansion_key != tuple(free):
-        J, g = (np.asarray(x) for x in _viscosity_sensitivity(as_arrays(values), ctx))
-        size = {c: int(np.asarray(ctx.observed[c]).size) for c in CHANNELS if c in ctx.observed}
-        start = {c: sum(size[d] for d in list(size)[:list(size).index(c)]) for c in running}
-        gs = {c: g[start[c]:start[c] + n] for c in running}
-        return sum(J[start[c]:start[c] + n] * gs[c][:, None] for c in running), gs
+        Jg, g = (np.asarray(x) for x in _viscosity_sensitivity(as_arrays(values), ctx))
+        order = [c for c in RUNNING_CHANNELS if c in ctx.observed]  # the residual's order
+        return Jg[:n], {c: g[order.index(c)][:n] for c in running}
     p = len(free)
     d = np.array([values[k] for k in exp.names]) - exp.p0
     dz = np.zeros((p + len(exp.pairs), p))  # ∂[δ; u(δ)]/∂δ

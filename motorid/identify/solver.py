@@ -1,7 +1,8 @@
 """The solvers of the fit: Gauss-Newton start, then Levenberg-Marquardt (optimistix).
 
 Two backends see the same problem: the full residual through the JAX model
-(:class:`FullBackend`), and its exact compression where the model is quadratic
+(:class:`FullBackend`; on many cells, Levenberg-Marquardt on normal equations built
+block by block), and its exact compression where the model is quadratic
 in the free parameters (:class:`CompressedBackend`, :mod:`motorid.identify.compress`).
 Both solve in unconstrained coordinates (log for the positive parameters, scaled).
 """
@@ -18,8 +19,8 @@ from motorid import model
 from motorid._aot import cached_jit
 from motorid.identify.compress import Expansion
 from motorid.identify.identifiability import null_space_reasons
-from motorid.identify.problem import (Ctx, Problem, as_arrays, from_unconstrained, normal_equations, residual_jit,
-                                      residual_unconstrained, to_unconstrained)
+from motorid.identify.problem import (BLOCK, Ctx, Problem, as_arrays, from_unconstrained, normal_blockwise,
+                                      normal_equations, residual_jit, residual_unconstrained, to_unconstrained)
 from motorid.identify.types import FitOptions
 
 
@@ -111,10 +112,73 @@ def _tolerances(opt: FitOptions) -> tuple:
     return np.asarray(opt.rtol, dtype=np.float64), np.asarray(opt.atol, dtype=np.float64)
 
 
+def levenberg_marquardt_normal(normal, chi2, y0, rtol, atol, max_steps):
+    """Levenberg-Marquardt on the normal equations: (y, steps, converged).
+
+    normal(y) → (JᵀJ, Jᵀr, rᵀr) of the residual r(y); chi2(y) → rᵀr.  The matrices are
+    parameters × parameters, so that the Jacobian is never held whole (``normal`` builds it
+    block by block); the step solves (JᵀJ + λ diag JᵀJ) δ = −Jᵀr (Marquardt's scaling), λ
+    updated from the ratio of actual to predicted decrease (Nielsen's rule).  Converged as
+    optimistix's Cauchy test: an accepted step with |δ| ≤ atol + rtol |y| and a decrease of
+    χ² ≤ atol + rtol χ² (or, where no step lowers χ² any more, a step that small)."""
+    y = np.asarray(y0, dtype=float)
+    A, g, f = (np.asarray(x, dtype=float) for x in normal(y))
+    f = float(f)
+    lam, nu = 1e-3, 2.0
+    for step in range(1, int(max_steps) + 1):
+        d = np.diag(A).copy()
+        d = np.maximum(d, 1e-12 * max(float(d.max(initial=0.0)), 1e-300))
+        with np.errstate(all="ignore"):
+            try:
+                dy = -np.linalg.solve(A + lam * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                dy = np.full_like(y, np.nan)
+        small = bool(np.all(np.abs(dy) <= atol + rtol * np.abs(y)))
+        trial = y + dy
+        f_new = float(chi2(trial)) if np.all(np.isfinite(dy)) else np.inf
+        if np.isfinite(f_new) and f_new <= f:
+            predicted = -(2.0 * g @ dy + dy @ A @ dy)
+            rho = (f - f_new) / predicted if predicted > 0 else 0.0
+            done = small and (f - f_new) <= atol + rtol * f
+            y, f = trial, f_new
+            if done:
+                return y, step, True
+            A, g, _ = (np.asarray(x, dtype=float) for x in normal(y))
+            lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+        else:
+            if small:  # no step this short lowers χ²: at the minimum to round-off
+                return y, step, True
+            lam *= nu
+            nu *= 2.0
+            if lam > 1e20:
+                break
+    return y, int(max_steps), False
+
+
 @cached_jit
 def _levenberg_marquardt(y0, ctx: Ctx, rtol, atol, max_steps):
-    """Optimistix LM on the full residual → (y, steps, converged)."""
+    """Optimistix LM on the full residual → (y, steps, converged): one compiled loop, for
+    problems of up to :data:`~motorid.identify.problem.BLOCK` cells (the screening cells of
+    diagnose), where a Python loop's calls would cost more than the Jacobian they hold."""
     return _run_levenberg_marquardt(residual_unconstrained, y0, ctx, rtol, atol, max_steps)
+
+
+@cached_jit
+def _normal_unconstrained(y, ctx: Ctx):
+    """JᵀJ, Jᵀr, rᵀr over the unconstrained coordinates (chain rule through the diagonal
+    d values / d y: the value where log-transformed, the scale elsewhere)."""
+    values = from_unconstrained(y, ctx)
+    A, g, f = normal_blockwise(values, ctx)
+    v = model.constrain(y, np.array(ctx.positive, dtype=bool), ctx.scales)
+    dv = jnp.where(np.array(ctx.positive, dtype=bool), v, ctx.scales)
+    return A * jnp.outer(dv, dv), g * dv, f
+
+
+@cached_jit
+def _chi2_unconstrained(y, ctx: Ctx):
+    r = residual_unconstrained(y, ctx)
+    return r @ r
 
 
 class FullBackend:
@@ -134,8 +198,16 @@ class FullBackend:
         mechs = self.problem.mechanisms
         scales = parameter_scales(values, free, mechs)
         ctx = self.problem.ctx(scales)
-        y0 = to_unconstrained(as_arrays(values), ctx)
-        y, steps, ok = _levenberg_marquardt(y0, ctx, *_tolerances(opt), opt.max_steps)
+        y0 = np.asarray(to_unconstrained(as_arrays(values), ctx))
+        if not self.problem.has_running or self.problem.cell_size <= (self.problem.block or BLOCK):
+            y, steps, ok = _levenberg_marquardt(y0, ctx, *_tolerances(opt), opt.max_steps)
+            new = {k: float(v) for k, v in from_unconstrained(y, ctx).items()}
+            return new, int(steps), bool(ok)
+        # many cells: the Jacobian block by block (its intermediates for every cell at once were
+        # the peak memory of a fit with nonlinear mechanisms)
+        y, steps, ok = levenberg_marquardt_normal(lambda y: _normal_unconstrained(y, ctx),
+                                                  lambda y: _chi2_unconstrained(y, ctx), y0,
+                                                  float(opt.rtol), float(opt.atol), opt.max_steps)
         new = {k: float(v) for k, v in from_unconstrained(y, ctx).items()}
         return new, int(steps), bool(ok)
 
