@@ -145,7 +145,7 @@ def _save(path: Path, compiled, hlo_text: str) -> None:
         pass
 
 
-def _trim_heap() -> None:
+def trim_heap() -> None:
     """Return freed heap pages to the system (glibc's ``malloc_trim``; elsewhere nothing): the
     executables of XLA are freed into the C heap, which keeps them resident otherwise."""
     import ctypes
@@ -224,7 +224,7 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
                 del inst._memory[key]
                 dropped += 1
         if dropped:
-            _trim_heap()
+            trim_heap()
         return dropped
 
     def _call_flat(self, dyn, leaves, dynamic, treedef):

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from motorid._aot import cached_jit
+from motorid._aot import trim_heap, cached_jit
 from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
 from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen
 from motorid.discrepancy.unexplained import extrapolation_check
@@ -441,7 +441,14 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     refused = list({r["id"]: r for r in refused if r["id"] not in kept}.values())  # asked twice: the last word
     # final model with its own noise estimate
     lap("selection bookkeeping")
-    final = fit_least_squares(dataset, spec, current_mechs, initial=current.params_all) if accepted else base
+    start = current.params_all
+    # what the selection held (the screening cells, the candidates' fits on every sample) is
+    # let go before the final fit, whose solve is the peak of diagnose's memory
+    screen = current_cells = reference = polished = current = scored = None
+    for c in accepted:
+        c.fit = c.cells = None
+    trim_heap()
+    final = fit_least_squares(dataset, spec, current_mechs, initial=start) if accepted else base
     lap("final fit")
     loc_after = locate(final, dataset, spec, alpha=alpha, min_effect=min_effect) if accepted else loc0
     lap("locate structure (final)")
