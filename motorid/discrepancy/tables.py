@@ -37,11 +37,35 @@ def _profile_bic(tf) -> float:
     return total + len(tf.ls.free) * math.log(max(n_all, 1))
 
 
-def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int = 3, candidates=None,
+#: ΔBIC a mechanism short of ``min_evidence`` must still earn ("strong" evidence on Kass & Raftery's
+#: scale, J. Am. Stat. Assoc. 90 (1995) 773) to be kept on held-out evidence ...
+HELD_OUT_EVIDENCE = 6.0
+#: ... where it also removes this share of the 5-fold held-out squared error of a channel of the
+#: table's points, as an empirical term must (discrepancy/table_terms.py) ...
+HELD_OUT_GAIN = 0.10
+#: ... and makes no channel's worse by more than this share
+HELD_OUT_COST = 0.02
+
+
+def held_out_gains(table, spec, current: list, mech) -> dict:
+    """channel → share of its 5-fold held-out squared error that ``mech`` removes from the model
+    with ``current`` (parameters refitted per fold; negative: worse)."""
+    from motorid.comparators.evaluate import MotoridModel, held_out
+
+    before = held_out(MotoridModel(spec, current), table)["kfold"]
+    after = held_out(MotoridModel(spec, current + [mech]), table)["kfold"]
+    return {c: 1.0 - (after[c]["rms"] / before[c]["rms"]) ** 2 for c in before
+            if c in after and before[c]["rms"] and after[c]["rms"] is not None}
+
+
+def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int = 4, candidates=None,
                    progress=None, dataset=None, log_fit=None) -> dict:
     """Forward selection of catalog mechanisms on a table: add the mechanism that lowers the
-    profiled BIC most, while it lowers it by at least ``min_evidence``; then the held-out
-    comparison of the model with what was found and of the classical models."""
+    profiled BIC most, while it lowers it by at least ``min_evidence``, or, on a table alone, by
+    at least :data:`HELD_OUT_EVIDENCE` while it removes :data:`HELD_OUT_GAIN` of a channel's
+    5-fold held-out squared error and costs no channel more than :data:`HELD_OUT_COST` (a law
+    that pays for itself on points it was not fitted on);
+    then the held-out comparison of the model with what was found and of the classical models."""
     from motorid.comparators.evaluate import compare
     from motorid.physics.registry import all_mechanisms
     from motorid.identify.tables import fit_table
@@ -73,7 +97,15 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
         b, mech, tf = min(trials, key=lambda t: t[0])
         steps.append({"id": mech.id, "delta_bic": bic - b})
         if bic - b < min_evidence:
-            break
+            if dataset is not None or bic - b < HELD_OUT_EVIDENCE or len(table) < 20:
+                break
+            gains = held_out_gains(table, spec, current, mech)
+            steps[-1]["held_out_gain"] = gains
+            if not gains or max(gains.values()) < HELD_OUT_GAIN or min(gains.values()) < -HELD_OUT_COST:
+                break
+            if progress:
+                progress(f"{mech.id}: ΔBIC {bic - b:.1f}; held out, it removes "
+                         + ", ".join(f"{100 * g:.0f} % of the {c} error" for c, g in gains.items()))
         current.append(mech)
         bic, best_fit = b, tf
     from motorid.discrepancy.table_terms import MotoridWithTerms, unexplained_table_entries
