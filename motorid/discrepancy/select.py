@@ -27,6 +27,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import jax
 import numpy as np
 
 from motorid._aot import trim_heap, cached_jit
@@ -306,6 +307,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     clock = [time.perf_counter()]
 
     def lap(step: str) -> None:
+        jax.clear_caches()  # the eager operations of the step (its compiled programs: next line)
         cached_jit.release_all()
         now = time.perf_counter()
         seconds[step] = seconds.get(step, 0.0) + now - clock[0]
