@@ -142,21 +142,54 @@ def _sizes(quick: bool) -> list[str]:
     return lines
 
 
+def drawn_value(pid: str, cal: dict, displacement: float):
+    """The value a named spec or sensor parameter should take on a foreign-bench campaign, from its
+    drawn calibration (manifest.json), as the model sees it: a torque zero shifted by the pressure
+    zeros through the ideal torque D/2π·ΔP; a port meter's gain relative to the speed's (the swept
+    flow D·ω is computed from the measured speed); None where no drawn quantity maps to it."""
+    off, gain = cal.get("offset", {}), cal.get("gain", {})
+    if pid == "torque_offset.T0":
+        return off.get("torque", 0.0) - displacement / (2 * 3.141592653589793) * (off.get("pa", 0.0) - off.get("pb", 0.0))
+    if pid == "torque_meter_gain.g":
+        return gain.get("torque", 1.0) - 1.0
+    if pid in ("flow_meter_gain_a.g", "flow_meter_gain_b.g"):
+        k = "qa" if pid.endswith("_a.g") else "qb"
+        return gain.get(k, 1.0) / gain.get("omega", 1.0) - 1.0
+    if pid == "flow_meter_gain_case.g":
+        return gain.get("qc", 1.0) - 1.0
+    return None
+
+
 def _foreign() -> list[str]:
+    import json
+
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "n12"
         subprocess.run([sys.executable, str(ROOT / "benchmarks" / "foreign_bench.py"), "make", "n12_offsets_gains",
                         str(out)], check=True, capture_output=True)
         spec = load_motor_spec(out / "motor.toml")
+        cal = json.loads((out / "manifest.json").read_text())["calibration"]
         start = time.perf_counter()
         _, ds = load_campaign(sorted((out / "logs").iterdir()), spec)
         doc = diagnosis_document(diagnose(ds, spec), spec)
         sec = time.perf_counter() - start
     named = ", ".join(m["id"] for m in doc["mechanisms"]) or "nothing"
     refused = ", ".join(r["id"] for r in doc.get("refused_stand_ins", [])) or "none"
-    return [f"`n12_offsets_gains` (0.05 % gain errors on torque, pressures, flows and speed, and small zero offsets "
-            f"on every channel): mismatch {doc['mismatch']}; named {named}; stand-ins refused: {refused}; "
-            f"{len(doc['unexplained'])} channel(s) left unexplained ({sec:.0f} s)."]
+    lines = [f"`n12_offsets_gains` (0.05 % gain errors on torque, pressures, flows and speed, and small zero offsets "
+             f"on every channel): mismatch {doc['mismatch']}; named {named}; stand-ins refused: {refused}; "
+             f"{len(doc['unexplained'])} channel(s) left unexplained ({sec:.0f} s)."]
+    rows = []
+    for m in doc["mechanisms"]:
+        for pid, p in m["parameters"].items():
+            drawn = drawn_value(pid, cal, spec.displacement)
+            if drawn is None or p.get("value") is None:
+                continue
+            z = (p["value"] - drawn) / p["std"] if p.get("std") else float("nan")
+            rows.append(f"| `{pid}` | {p['value']:.4g} ± {p['std']:.2g} | {drawn:.4g} | {z:+.1f} |")
+    if rows:
+        lines += ["", "Named values against the drawn calibration (as the model sees it: `drawn_value`):", "",
+                  "| parameter | fitted | drawn | (fitted − drawn)/std |", "|---|---:|---:|---:|"] + rows
+    return lines
 
 
 def run(quick: bool = False) -> str:
