@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import tempfile
@@ -149,7 +150,7 @@ def drawn_value(pid: str, cal: dict, displacement: float):
     flow D·ω is computed from the measured speed); None where no drawn quantity maps to it."""
     off, gain = cal.get("offset", {}), cal.get("gain", {})
     if pid == "torque_offset.T0":
-        return off.get("torque", 0.0) - displacement / (2 * 3.141592653589793) * (off.get("pa", 0.0) - off.get("pb", 0.0))
+        return off.get("torque", 0.0) - displacement / (2 * math.pi) * (off.get("pa", 0.0) - off.get("pb", 0.0))
     if pid == "torque_meter_gain.g":
         return gain.get("torque", 1.0) - 1.0
     if pid in ("flow_meter_gain_a.g", "flow_meter_gain_b.g"):

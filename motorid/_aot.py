@@ -145,18 +145,25 @@ def _save(path: Path, compiled, hlo_text: str) -> None:
         pass
 
 
+_LIBC: list = []  # the C library, looked up once (find_library runs a subprocess)
+
+
 def trim_heap() -> None:
     """Return freed heap pages to the system (glibc's ``malloc_trim``; elsewhere nothing): the
     executables of XLA are freed into the C heap, which keeps them resident otherwise."""
-    import ctypes
-    import ctypes.util
     import gc
 
     gc.collect()
-    try:
-        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):
-        pass
+    if not _LIBC:
+        import ctypes
+        import ctypes.util
+
+        try:
+            _LIBC.append(getattr(ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6"), "malloc_trim", None))
+        except OSError:
+            _LIBC.append(None)
+    if _LIBC[0] is not None:
+        _LIBC[0](0)
 
 
 class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import jax
 import numpy as np
 
-from motorid._aot import trim_heap, cached_jit
+from motorid._aot import cached_jit, trim_heap
 from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
 from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen
 from motorid.discrepancy.unexplained import extrapolation_check
@@ -47,7 +47,7 @@ EVALUATED = "fit on the cells, polished on every sample"
 @dataclass
 class Candidate:
     mechanism: object
-    fit: FitResult
+    fit: FitResult | None  # let go (None) once the final fit starts: diagnose's memory
     delta_chi2: float
     delta_bic: float
     cv_gain: float | None = None  # held-out χ² of the current model minus this one's

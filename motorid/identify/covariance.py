@@ -83,8 +83,8 @@ def breakaway_sandwich(problem: Problem, values: dict, cov: np.ndarray, residual
 @cached_jit
 def _viscosity_sensitivity(values: dict, ctx: Ctx):
     """(Σ_c (∂r_c/∂β)(∂r_c/∂μ), cells × free; ∂r_c/∂μ, channels × cells) of the weighted
-    residual of the running cells, r_c = w·(observed − predicted) in the order of
-    ``ctx.observed``, μ the cells' viscosity (each cell's prediction depends on its own
+    residual of the running cells, r_c = w·(observed − predicted) in the residual's
+    order of the running channels, μ the cells' viscosity (each cell's prediction depends on its own
     viscosity only, so one tangent of ones gives every cell's); block by block, so that no
     Jacobian over every cell is held (:func:`~motorid.identify.problem.over_cell_blocks`)."""
 

@@ -201,13 +201,11 @@ class FullBackend:
         y0 = np.asarray(to_unconstrained(as_arrays(values), ctx))
         if not self.problem.has_running or self.problem.cell_size <= (self.problem.block or BLOCK):
             y, steps, ok = _levenberg_marquardt(y0, ctx, *_tolerances(opt), opt.max_steps)
-            new = {k: float(v) for k, v in from_unconstrained(y, ctx).items()}
-            return new, int(steps), bool(ok)
-        # many cells: the Jacobian block by block (its intermediates for every cell at once were
-        # the peak memory of a fit with nonlinear mechanisms)
-        y, steps, ok = levenberg_marquardt_normal(lambda y: _normal_unconstrained(y, ctx),
-                                                  lambda y: _chi2_unconstrained(y, ctx), y0,
-                                                  float(opt.rtol), float(opt.atol), opt.max_steps)
+        else:  # many cells: the Jacobian block by block (its intermediates for every cell at once
+            # were the peak memory of a fit with nonlinear mechanisms)
+            y, steps, ok = levenberg_marquardt_normal(lambda y: _normal_unconstrained(y, ctx),
+                                                      lambda y: _chi2_unconstrained(y, ctx), y0,
+                                                      float(opt.rtol), float(opt.atol), opt.max_steps)
         new = {k: float(v) for k, v in from_unconstrained(y, ctx).items()}
         return new, int(steps), bool(ok)
 
