@@ -46,12 +46,15 @@ SIZES = {
     "sensor_lag_q_a": ("sensor_lag_q_a", "lag", "q_a", None, (0.5e-3,)),
     "sensor_lag_q_b": ("sensor_lag_q_a", "lag", "q_b", None, (0.5e-3, 1e-3)),
     "per_run_offset_torque": ("per_run_offsets", "offset_sd", "torque", None, (0.1, 0.25)),
+    "flow_meter_offset_a": ("flow_meter_offset_a", "offset", "q_a", None, (3e-7, -6e-7)),
+    "flow_meter_offset_b": ("flow_meter_offset_case", "offset", "q_b", None, (4e-7,)),
+    "flow_meter_offset_case": ("flow_meter_offset_case", "offset", "q_case", None, (1e-7, -2e-7)),
     "extra_torque_order3_dp": ("extra_torque_order3_dp", "extra", "torque_order3_dp", None, (1e-8,)),
     "extra_case_leak_pa_pb": ("extra_case_leak_pa_pb", "extra", "case_leak_pa_pb", None, (2.5e-20,)),
 }
 #: the quick setting: the campaigns and sizes of the causes added in the last change, one seed each
-QUICK_SHIPPED = ("causes_gains_and_offsets", "causes_clean_9_seed214")
-QUICK_SIZES = ("flow_meter_gain_b", "sensor_lag_q_b", "per_run_offset_torque")
+QUICK_SHIPPED = ("causes_offsets_and_gain", "causes_clean_9_seed214")
+QUICK_SIZES = ("flow_meter_offset_b", "flow_meter_offset_case", "per_run_offset_torque")
 
 
 def _diagnose(folder: Path) -> tuple[dict, float]:
@@ -147,7 +150,8 @@ def drawn_value(pid: str, cal: dict, displacement: float):
     """The value a named spec or sensor parameter should take on a foreign-bench campaign, from its
     drawn calibration (manifest.json), as the model sees it: a torque zero shifted by the pressure
     zeros through the ideal torque D/2π·ΔP; a port meter's gain relative to the speed's (the swept
-    flow D·ω is computed from the measured speed); None where no drawn quantity maps to it."""
+    flow D·ω is computed from the measured speed); a flow meter's zero as drawn; None where no drawn
+    quantity maps to it."""
     off, gain = cal.get("offset", {}), cal.get("gain", {})
     if pid == "torque_offset.T0":
         return off.get("torque", 0.0) - displacement / (2 * math.pi) * (off.get("pa", 0.0) - off.get("pb", 0.0))
@@ -158,6 +162,8 @@ def drawn_value(pid: str, cal: dict, displacement: float):
         return gain.get(k, 1.0) / gain.get("omega", 1.0) - 1.0
     if pid == "flow_meter_gain_case.g":
         return gain.get("qc", 1.0) - 1.0
+    if pid.startswith("flow_meter_offset_"):
+        return off.get({"a": "qa", "b": "qb", "case": "qc"}[pid.split(".")[0].rsplit("_", 1)[1]], 0.0)
     return None
 
 

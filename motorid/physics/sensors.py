@@ -26,8 +26,14 @@ reports, never the motor's physics):
   the pressure torque D ΔP S(θ)/2n and swept flow D ω S(θ)/2n through the Fourier
   series of S(θ) (:func:`port_sum_harmonics`), and the leakage harmonics K_L(θ).
 
-Zero offsets: a constant torque offset is :class:`TorqueOffset` (``torque_offset``);
-offsets that differ run to run are told from the motor by
+- ``flow_meter_offset_a``, ``flow_meter_offset_b``, ``flow_meter_offset_case``:
+  one flow meter reads a constant c on top of the true flow, the same in
+  every run.  The mass balance breaks by c at every operating point, at rest
+  and in both directions (a gain breaks it in proportion to the flow, so not
+  at zero speed and with the sign of the swept flow).
+
+Zero offsets: a constant torque offset is :class:`TorqueOffset` (``torque_offset``), a constant
+flow-meter offset :class:`MeterOffset`; offsets that differ run to run are told from the motor by
 :mod:`motorid.discrepancy.unexplained` (they follow no operating variable).
 """
 
@@ -143,12 +149,30 @@ def lagged_leakage_change(theta, speed, tau, params, pistons: int):
     return params["KL0"] * total
 
 
-class MeterGain(CatalogMechanism):
-    """A transducer reading (1 + g) times the true value of one channel [-]."""
+class _LinearReading(CatalogMechanism):
+    """A transducer error on one channel, linear in its one parameter (a gain, a zero)."""
 
     sensor = True  # changes a reading, not the motor: exports leave it out
 
-    single_start = True  # linear in g: one start of the fit is enough
+    single_start = True  # linear in its parameter: one start of the fit is enough
+
+    channel = "torque"
+
+    def seen_by(self, dataset) -> bool:
+        """A flow meter's error is tried only where the meters keep their zeros: where they wander from run
+        to run the fit cannot tell a gain or a constant zero from the zeros in the run means, and the mass
+        balance's own estimate of the gains (:func:`~motorid.physics.mass_balance.flow_balance`, with
+        random-effects weights) goes into the unexplained entry instead.  The torque transducer's is always
+        tried."""
+        if self.channel == "torque":
+            return True
+        from motorid.physics.mass_balance import flow_zeros_wander
+
+        return not flow_zeros_wander(dataset)
+
+
+class MeterGain(_LinearReading):
+    """A transducer reading (1 + g) times the true value of one channel [-]."""
 
     def __init__(self, channel: str):
         self.channel = channel
@@ -193,17 +217,6 @@ class MeterGain(CatalogMechanism):
         self.name = f"{word} gain error"
         self.parameters = {f"{self.id}.g": ParameterInfo(
             "-", f"relative gain error of the {word}: reading = (1 + g)·true {unit_words}", False, 0.01)}
-
-    def seen_by(self, dataset) -> bool:
-        """A flow meter's gain is tried only where the meters keep their zeros: where they wander from run
-        to run the fit cannot tell a gain from the zeros in the run means, and the mass balance's own
-        estimate of the gains (:func:`~motorid.physics.mass_balance.flow_balance`, with random-effects
-        weights) goes into the unexplained entry instead.  The torque transducer's gain is always tried."""
-        if self.channel == "torque":
-            return True
-        from motorid.physics.mass_balance import flow_zeros_wander
-
-        return not flow_zeros_wander(dataset)
 
     def running(self, params, spec, samples, ch):
         g = self.param(params, "g")
@@ -283,6 +296,43 @@ class SensorLag(CatalogMechanism):
         return text
 
 
+class MeterOffset(_LinearReading):
+    """A flow meter reading a constant c [m³/s] on top of the true flow of one channel, in every run."""
+
+    def __init__(self, channel: str):
+        self.channel = channel
+        word = _METER_WORDS[channel]
+        self.id = f"flow_meter_offset_{_SUFFIX[channel]}"
+        self.name = f"{word} zero offset"
+        self.channels = (channel,)
+        self.shows_in = ("q_a", "q_b", "q_case")  # the base fit spreads one meter's zero over all flows
+        where = ("the case-drain flow" if channel == "q_case" else f"port {_SUFFIX[channel].upper()} flow")
+        self.signature = (f"{where} shifted by one constant at every speed, pressure and temperature, with the "
+                          "same sign in both directions of rotation (a gain error follows the flow, the swept flow "
+                          "changes sign with the direction, a leakage follows ΔP/μ): the mass balance "
+                          "Q_A + Q_B = Q_case breaks by the same amount in every run")
+        self.reference = ("ISO 4392-1:2002 and ISO 9110-1:1990 (measurement accuracy of hydraulic test benches); "
+                          "E. O. Doebelin, 'Measurement Systems: Application and Design', 5th ed., McGraw-Hill, 2004 "
+                          "(zero offset and drift)")
+        self.physics = (f"The {word} reads a flow where none passes, from a zero that was not set, an amplifier "
+                        "drift or a frequency-to-analogue converter's offset. "
+                        "The same amount is added to every reading, so the meters' flows no longer add up and the "
+                        "error is largest, relative to the flow, at low speed and low leakage.")
+        typical = 2e-7 if channel == "q_case" else 1e-6  # 0.012 and 0.06 L/min: a fraction of a meter's class
+        self.parameters = {f"{self.id}.c": ParameterInfo(
+            "m³/s", f"zero offset of the {word}: reading = true flow + c", False, typical)}
+
+    def running(self, params, spec, samples, ch):
+        c = self.param(params, "c")
+        return ch._replace(**{self.channel: getattr(ch, self.channel) + c})
+
+    def describe(self, values, spec=None) -> str:
+        c = self.value(values, "c")
+        word = _METER_WORDS[self.channel]
+        return (f"the {word} reads {abs(c) * 6e4:.3g} L/min {'high' if c >= 0 else 'low'} at every operating "
+                "point and in both directions (zero offset)")
+
+
 def _channel_words(channel: str) -> str:
     return {"torque": "running torque", "q_a": "port A flow", "q_b": "port B flow",
             "q_case": "case-drain flow"}[channel]
@@ -290,6 +340,7 @@ def _channel_words(channel: str) -> str:
 
 MECHANISMS = (
     MeterGain("q_a"), MeterGain("q_b"), MeterGain("q_case"), MeterGain("torque"),
+    MeterOffset("q_a"), MeterOffset("q_b"), MeterOffset("q_case"),
     SensorLag("torque"), SensorLag("q_a"), SensorLag("q_b"), SensorLag("q_case"),
 )
 

@@ -62,7 +62,8 @@ EXTRA = {"friction_inverse_viscosity": _friction_inverse_viscosity, "case_leak_p
 
 # name: (pistons, seed, physics {mechanism: {parameter: value}}, transducers, extra {effect: size}
 #        [, protocol folder: default causes_protocols])
-#   transducers: {"gain": {channel: g}, "lag": {channel: τ [s]}, "offset_sd": {channel: σ [SI]}}
+#   transducers: {"gain": {channel: g}, "lag": {channel: τ [s]}, "offset": {channel: constant zero [SI]},
+#                 "offset_sd": {channel: σ of a zero drawn per run [SI]}}
 CASES = {
     "displacement_error": (9, 201, {"displacement_error": {"eps": -0.02}}, {}, {}),
     "displacement_error_8": (8, 202, {"displacement_error": {"eps": 0.015}}, {}, {}),
@@ -85,6 +86,10 @@ CASES = {
     "gains_and_offsets": (8, 216, {}, {"gain": {"torque": 0.004, "q_a": -0.005, "q_case": 0.01},
                                        "offset_sd": {"torque": 0.15, "q_a": 6e-7, "q_b": 6e-7,
                                                      "q_case": 3e-8}}, {}),
+    # constant zero offsets of a flow meter (the same in every run), alone and with a gain and a torque zero
+    "flow_meter_offset_a": (9, 217, {}, {"offset": {"q_a": 5e-7}}, {}),
+    "flow_meter_offset_case": (8, 218, {}, {"offset": {"q_case": -1.5e-7}}, {}),
+    "offsets_and_gain": (9, 219, {}, {"gain": {"q_a": 0.006}, "offset": {"q_b": -6e-7, "torque": 0.4}}, {}),
 }
 
 
@@ -96,6 +101,8 @@ def truth_document(pistons: int, physics: dict, sensors: dict, extra: dict) -> s
         mechs[{"torque": "torque_meter_gain"}.get(ch, f"flow_meter_gain_{ch[2:]}")] = {"g": g}
     for ch, tau in sensors.get("lag", {}).items():
         mechs[f"sensor_lag_{ch}"] = {"tau": tau}
+    for ch, c in sensors.get("offset", {}).items():
+        mechs["torque_offset" if ch == "torque" else f"flow_meter_offset_{ch[2:]}"] = {"T0" if ch == "torque" else "c": c}
     text = truth_text(pistons, mechs)
     for ch, sd in sensors.get("offset_sd", {}).items():
         text += f"\n[per_run_offset.{ch}]\nsd = {sd!r}\n"
@@ -159,6 +166,8 @@ def simulate_case(spec, truth, protocols, seed: int, sensors: dict, extra: dict)
             f = {c: v[::k] for c, v in f.items()}
             for ch, g in sensors.get("gain", {}).items():
                 f[COLUMN[ch]] = f[COLUMN[ch]] * (1.0 + g)
+            for ch, c in sensors.get("offset", {}).items():
+                f[COLUMN[ch]] = f[COLUMN[ch]] + c
             for ch, sd in sensors.get("offset_sd", {}).items():
                 f[COLUMN[ch]] = f[COLUMN[ch]] + rng.normal(0.0, sd)
             read = p.sensors.read({c: v for c, v in f.items() if c not in ("run_id", "protocol", "time_s")},
