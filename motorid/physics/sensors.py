@@ -318,7 +318,7 @@ class MeterOffset(_LinearReading):
                         "drift or a frequency-to-analogue converter's offset. "
                         "The same amount is added to every reading, so the meters' flows no longer add up and the "
                         "error is largest, relative to the flow, at low speed and low leakage.")
-        typical = 2e-7 if channel == "q_case" else 1e-6  # 0.012 and 0.06 L/min: a fraction of a meter's class
+        typical = 2e-7 if channel == "q_case" else 3e-6  # 0.012 and 0.18 L/min: a fraction of a meter's class
         self.parameters = {f"{self.id}.c": ParameterInfo(
             "m³/s", f"zero offset of the {word}: reading = true flow + c", False, typical)}
 

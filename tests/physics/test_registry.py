@@ -35,6 +35,7 @@ VALUES = {
     "displacement_error.eps": 0.02, "leak_phase.dphi": 0.15,
     "flow_meter_gain_a.g": 0.01, "flow_meter_gain_b.g": -0.012, "flow_meter_gain_case.g": 0.03,
     "torque_meter_gain.g": -0.008,
+    "flow_meter_offset_a.c": 5e-7, "flow_meter_offset_b.c": -4e-7, "flow_meter_offset_case.c": 1.5e-7,
     "sensor_lag_torque.tau": 2e-3, "sensor_lag_q_a.tau": 5e-3, "sensor_lag_q_b.tau": 4e-3,
     "sensor_lag_q_case.tau": 3e-3,
     "mixed_lubrication.C_m": 0.015, "mixed_lubrication.S_m": 2e-9,  # motorid/physics (issue 20)
