@@ -65,6 +65,11 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
 RIPPLE_F = 2.0
 
 
+#: two shaft orders whose aliased frequencies differ by fewer cycles over the run than this
+#: read as one (a least-squares fit separates frequencies about one cycle per record apart)
+FOLD_CYCLES = 2.0
+
+
 def aliased_cycles(time, speed, orders) -> dict:
     """Cycles that each shaft order of a steady run goes through as the samples see it
     (aliased) → {order: cycles over the run} [-].  Order k turns k·ω̄·Δt/2π cycles a
@@ -141,6 +146,12 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
         # an order the sampling folds near 0 Hz is the trend's; near the Nyquist frequency its
         # cosine and sine read alike
         if not (cycles[k] >= m / 2 + 1 and 0.5 * sel.size - cycles[k] >= 1.0):
+            continue
+        # folded onto an order already kept (at 1000 rpm and 50 Hz, three samples a revolution,
+        # orders 1 and 2 read at one frequency): the two cannot be told apart over the run, and
+        # a near-collinear pair splits the ripple into large opposite parts whose derivatives,
+        # weighted k·ω, no longer cancel
+        if any(abs(cycles[k] - cycles[j]) < FOLD_CYCLES for j in kept):
             continue
         c, rss, dof, cond = fit(kept + [k])
         if c is None or dof < 20 or cond > 1e6 or not rss > 0:
