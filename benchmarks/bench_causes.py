@@ -35,8 +35,9 @@ from motorid.identify.pipeline import load_campaign  # noqa: E402
 from motorid.io.spec import load_motor_spec  # noqa: E402
 
 #: study row → (shipped case giving pistons, seed and protocols; kind; channel or mechanism; parameter; sizes).
-#: Other forms of a cause (a gain on another meter, a lag on another transducer) are rows of their own;
-#: "extra" rows scale an effect in no catalog, "offset_sd" rows the per-run zero offsets.
+#: Other forms of a cause (a gain, a zero on another meter, a lag on another transducer) are rows of their own;
+#: "extra" rows scale an effect in no catalog, "offset" rows a constant meter zero, "offset_sd" rows the
+#: per-run zero offsets.
 SIZES = {
     "displacement_error": ("displacement_error", "physics", "displacement_error", "eps", (-0.005, -0.01)),
     "flow_meter_gain_case": ("flow_meter_gain_case", "gain", "q_case", None, (-0.01, -0.02)),
@@ -52,7 +53,7 @@ SIZES = {
     "extra_torque_order3_dp": ("extra_torque_order3_dp", "extra", "torque_order3_dp", None, (1e-8,)),
     "extra_case_leak_pa_pb": ("extra_case_leak_pa_pb", "extra", "case_leak_pa_pb", None, (2.5e-20,)),
 }
-#: the quick setting: the campaigns and sizes of the causes added in the last change, one seed each
+#: the quick setting: the newest causes (constant meter zeros) and per-run zeros, one seed each
 QUICK_SHIPPED = ("causes_offsets_and_gain", "causes_clean_9_seed214")
 QUICK_SIZES = ("flow_meter_offset_b", "flow_meter_offset_case", "per_run_offset_torque")
 
@@ -202,7 +203,7 @@ def _foreign() -> list[str]:
 def run(quick: bool = False) -> str:
     lines = ["## The real causes of a mismatch (issue 15)", "",
              "`motorid diagnose` on the concealed-cause campaigns (spec errors, transducer gains and lags, "
-             "and effects in no catalog; truths kept apart, `synthetic_data/concealed/generate_causes.py`).", ""]
+             "and zeros, and effects in no catalog; truths kept apart, `synthetic_data/concealed/generate_causes.py`).", ""]
     if quick:
         lines += ["Quick setting (`--quick`): the campaigns of the causes added last, one seed per size, one "
                   "clean campaign; the full run diagnoses every shipped campaign, two seeds per size, four clean "

@@ -29,9 +29,10 @@ def test_an_offset_adds_one_constant_to_its_meter_alone_where_a_gain_adds_nothin
             np.testing.assert_allclose(change, 3e-7 if name == channel else 0.0, atol=1e-20)
         # the gain's change is proportional to the flow: nothing where the meter reads zero flow
         g = gain.running({f"{gain.id}.g": 0.01}, None, None, ch)
-        assert float(getattr(g, channel)[0] - getattr(ch, channel)[0]) == 0.0
-        assert "L/min high" in offset.describe({f"{offset.id}.c": 3e-7})
-        assert "0.018 L/min" in offset.describe({f"{offset.id}.c": 3e-7})
+        np.testing.assert_allclose(np.asarray(getattr(g, channel) - getattr(ch, channel)),
+                                   0.01 * np.asarray(getattr(ch, channel)), rtol=1e-12, atol=0)
+        assert "0.018 L/min high" in offset.describe({f"{offset.id}.c": 3e-7})
+        assert "0.006 L/min low" in offset.describe({f"{offset.id}.c": -1e-7})
 
 
 def test_the_mass_balance_shows_a_constant_zero_as_its_intercept_and_does_not_call_it_wandering():

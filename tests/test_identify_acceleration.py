@@ -77,8 +77,8 @@ def test_shaft_ripple_where_two_orders_alias_onto_one_frequency():
 
 def test_two_orders_nearly_folded_onto_one_frequency_are_not_split_into_large_opposite_parts():
     """1000.1 rpm at 50 Hz for one second under a 2 Hz speed wander (an ISO 4392 constant-pressure
-    run): orders 1 and 2 alias to frequencies 0.1 cycle apart over the run, near-collinear but not
-    singular.  Fitted together they took a 0.1 rad/s wobble as two ripples of opposite sign whose
+    run): orders 1 and 2 alias to frequencies 0.0025 cycle apart over the run, near-collinear but
+    not singular.  Fitted together they took a 0.1 rad/s wobble as two ripples of opposite sign whose
     derivatives, weighted ω and 2ω, no longer cancel: an acceleration ten times the truth, J·α of which
     went into the torque residual.  The second order is now left out as folded."""
     rng = np.random.default_rng(5)

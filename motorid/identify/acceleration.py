@@ -150,7 +150,9 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
         # folded onto an order already kept (at 1000 rpm and 50 Hz, three samples a revolution,
         # orders 1 and 2 read at one frequency): the two cannot be told apart over the run, and
         # a near-collinear pair splits the ripple into large opposite parts whose derivatives,
-        # weighted k·ω, no longer cancel
+        # weighted k·ω, no longer cancel; the lower order then stands for both (a true order-2
+        # wobble at three samples a revolution reads as −½ of its acceleration: the samples
+        # cannot tell the two apart)
         if any(abs(cycles[k] - cycles[j]) < FOLD_CYCLES for j in kept):
             continue
         c, rss, dof, cond = fit(kept + [k])

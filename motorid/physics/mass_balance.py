@@ -80,7 +80,8 @@ def flow_balance(dataset, alpha: float = 1e-3) -> dict | None:
     """The parameter-free mass balance of the three flow meters, run by run.
 
     Returns None without the three flows, else ``{law, gain_differences {"g_A − g_case",
-    "g_B − g_case"} [-], offset_spread [m³/s] (σ of o_A + o_B − o_case from run to run), p_value,
+    "g_B − g_case"} [-] and their std, mean_zero [m³/s] (the balance's intercept: o_A + o_B − o_case
+    of zeros that stay put), offset_spread [m³/s] (σ of o_A + o_B − o_case from run to run), p_value,
     runs, offsets (bool: a significant spread at ``alpha``), words}``.
     """
     meas = getattr(dataset, "measured", None)

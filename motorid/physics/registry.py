@@ -47,7 +47,8 @@ _ALL = (
     PumpModeFriction(),
     FilmHeating(),  # the viscous loss bending over at high speed (real maps, issue 20)
     *spec_errors.MECHANISMS,  # displacement_error, leak_phase
-    *sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, flow_meter_offset_a/b/case, sensor_lag_<channel>
+    *sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, flow_meter_offset_a/b/case,
+    #                       sensor_lag_<channel>
 )
 
 #: every mechanism by id (singletons)

@@ -28,9 +28,10 @@ reports, never the motor's physics):
 
 - ``flow_meter_offset_a``, ``flow_meter_offset_b``, ``flow_meter_offset_case``:
   one flow meter reads a constant c on top of the true flow, the same in
-  every run.  The mass balance breaks by c at every operating point, at rest
-  and in both directions (a gain breaks it in proportion to the flow, so not
-  at zero speed and with the sign of the swept flow).
+  every run.  The mass balance breaks by ±c (−c for the case meter) at every
+  operating point, at rest and in both directions (a gain breaks it in
+  proportion to the flow, so not at zero flow, and a port meter's with the
+  sign of the swept flow).
 
 Zero offsets: a constant torque offset is :class:`TorqueOffset` (``torque_offset``), a constant
 flow-meter offset :class:`MeterOffset`; offsets that differ run to run are told from the motor by
@@ -46,7 +47,7 @@ import jax.numpy as jnp
 from motorid import _jaxconfig  # noqa: F401
 from motorid.physics.base import CatalogMechanism, ParameterInfo
 from motorid.physics.flow import leakage_harmonics
-from motorid.units import RAD_S_PER_RPM
+from motorid.units import LPM_PER_M3S, RAD_S_PER_RPM
 #: shaft orders of S(θ) kept in the lagged ripple (harmonics above fall off as 1/k² and are filtered anyway)
 PORT_SUM_HARMONICS = 24
 
@@ -156,7 +157,7 @@ class _LinearReading(CatalogMechanism):
 
     single_start = True  # linear in its parameter: one start of the fit is enough
 
-    channel = "torque"
+    channel: str  # set by each instance: torque, q_a, q_b or q_case
 
     def seen_by(self, dataset) -> bool:
         """A flow meter's error is tried only where the meters keep their zeros: where they wander from run
@@ -329,7 +330,7 @@ class MeterOffset(_LinearReading):
     def describe(self, values, spec=None) -> str:
         c = self.value(values, "c")
         word = _METER_WORDS[self.channel]
-        return (f"the {word} reads {abs(c) * 6e4:.3g} L/min {'high' if c >= 0 else 'low'} at every operating "
+        return (f"the {word} reads {abs(c) * LPM_PER_M3S:.3g} L/min {'high' if c >= 0 else 'low'} at every operating "
                 "point and in both directions (zero offset)")
 
 

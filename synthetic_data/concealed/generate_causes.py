@@ -102,7 +102,10 @@ def truth_document(pistons: int, physics: dict, sensors: dict, extra: dict) -> s
     for ch, tau in sensors.get("lag", {}).items():
         mechs[f"sensor_lag_{ch}"] = {"tau": tau}
     for ch, c in sensors.get("offset", {}).items():
-        mechs["torque_offset" if ch == "torque" else f"flow_meter_offset_{ch[2:]}"] = {"T0" if ch == "torque" else "c": c}
+        if ch == "torque":
+            mechs["torque_offset"] = {"T0": c}
+        else:
+            mechs[f"flow_meter_offset_{ch[2:]}"] = {"c": c}
     text = truth_text(pistons, mechs)
     for ch, sd in sensors.get("offset_sd", {}).items():
         text += f"\n[per_run_offset.{ch}]\nsd = {sd!r}\n"
