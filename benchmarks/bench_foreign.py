@@ -74,7 +74,7 @@ def fit_campaign(info: dict, out: Path, timeout: float = 600.0) -> dict:
 #: scenarios whose logs hold something the 1992 model leaves out: a finding of
 #: `motorid diagnose` there is no false alarm
 OUTSIDE_MODEL = {
-    "n12_offsets_gains": "per-run sensor zero offsets and 0.05 % gain errors",
+    "n12_offsets_gains": "constant sensor zero offsets and 0.05 % gain errors",
     "n8_us_units_noviscosity": "an oil density law other than the spec's",
 }
 
