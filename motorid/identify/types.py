@@ -60,6 +60,9 @@ class ExtractSettings:
     accel_window : window of the local quadratic fit giving the acceleration [samples]
     shaft_orders : shaft orders of a speed ripple locked to the shaft angle, whose
         acceleration is taken from θ, not from differences of sampled speed [-]
+    piston_order_ripple : resolve the piston order n too, where the sampling and the
+        misfit test allow: the motor's own pressure-torque ripple shakes the shaft at it
+        through the coupling's compliance, and J·α of that ripple is in the torque [-]
     stuck_turn : most the shaft angle may change before a breakaway, creep included [rad]
     smooth_viscosity : replace each running run's viscometer readings by a
         polynomial in time (:func:`smooth_viscosity`) where the readings are a
@@ -76,6 +79,7 @@ class ExtractSettings:
     pressure_floor: float = 5e3
     accel_window: int = 9
     shaft_orders: tuple = (1, 2)
+    piston_order_ripple: bool = True
     stuck_turn: float = 0.2
     smooth_viscosity: bool = True
     viscosity_max_degree: int = 5
