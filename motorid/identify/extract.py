@@ -86,7 +86,7 @@ class _Gathered:
     """What the runs give, run by run, before it is joined into a :class:`Dataset`."""
 
     n_runs: int
-    pistons: int = 0  # the motor's piston order, resolved in the speed ripple besides the shaft orders
+    accel_orders: tuple = (1, 2)  # shaft orders of the speed ripple resolved in the acceleration
     excluded: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     rows: list = field(default_factory=list)
@@ -124,6 +124,15 @@ def _add_startability(g: _Gathered, r: int, key, cols, row: dict, settings) -> N
             g.pending.append((event, cols))
 
 
+def _accel_orders(settings, spec) -> tuple:
+    """The shaft orders of the speed ripple resolved in the acceleration: the settings' orders, and
+    the piston order n where ``settings.piston_order_ripple`` (the motor's own torque ripple)."""
+    orders = tuple(int(k) for k in settings.shaft_orders)
+    if settings.piston_order_ripple and int(spec.pistons) not in orders:
+        orders += (int(spec.pistons),)
+    return orders
+
+
 def _add_running(g: _Gathered, r: int, key, pos, cols, row: dict, settings, cells=None):
     """The steady samples of a running run, their acceleration and smoothed viscosity → the
     positions used for the run's medians (every sample where none is steady).  With
@@ -135,11 +144,8 @@ def _add_running(g: _Gathered, r: int, key, pos, cols, row: dict, settings, cell
         return np.arange(pos.size)
     steady = np.zeros(pos.size, bool)
     steady[chosen] = True
-    orders = tuple(settings.shaft_orders)
-    if settings.piston_order_ripple and g.pistons and g.pistons not in orders:
-        orders += (int(g.pistons),)
     acc = running_acceleration(cols["time_s"], cols["speed_rad_s"], cols["theta_rad"], steady,
-                               settings.accel_window, orders)
+                               settings.accel_window, g.accel_orders)
     _note_in_step(g.notes, key, cols["time_s"][chosen], cols["speed_rad_s"][chosen], settings.shaft_orders)
     mu = cols["viscosity_Pa_s"][chosen]
     if settings.smooth_viscosity:
@@ -213,7 +219,7 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
     _check_frame(frame)
     _check_spec(spec)
     index = _Runs(frame)
-    g = _Gathered(len(index.keys), pistons=int(spec.pistons))
+    g = _Gathered(len(index.keys), accel_orders=_accel_orders(settings, spec))
     for r, key in enumerate(index.keys):
         pos, cols, protocol, file = index.run(r)
         _extract_run(g, r, key, pos, cols, protocol, file, settings)
@@ -272,7 +278,7 @@ def extract_cells(runs, spec: MotorSpec, settings: ExtractSettings | None = None
 
     settings = settings or ExtractSettings()
     _check_spec(spec)
-    g = _Gathered(0, pistons=int(spec.pistons))
+    g = _Gathered(0, accel_orders=_accel_orders(settings, spec))
     cells = CellReducer(spec, bins_per_pitch, outlier_sigma)
     with bar(desc="extracting", unit="run", progress=progress) as pbar:
         for r, run in enumerate(runs):

@@ -310,7 +310,7 @@ class MeterOffset(_LinearReading):
         where = ("the case-drain flow" if channel == "q_case" else f"port {_SUFFIX[channel].upper()} flow")
         self.signature = (f"{where} shifted by one constant at every speed, pressure and temperature, with the "
                           "same sign in both directions of rotation (a gain error follows the flow, the swept flow "
-                          "changes sign with the direction, a leakage follows ΔP/μ): the mass balance "
+                          "changes sign with the direction, a leakage follows (P − P_c)/μ): the mass balance "
                           "Q_A + Q_B = Q_case breaks by the same amount in every run")
         self.reference = ("ISO 4392-1:2002 and ISO 9110-1:1990 (measurement accuracy of hydraulic test benches); "
                           "E. O. Doebelin, 'Measurement Systems: Application and Design', 5th ed., McGraw-Hill, 2004 "
