@@ -57,6 +57,37 @@ def _synthetic(mech_id, spec, rng):
         return read_table(p, spec)
 
 
+#: a map put together from three recordings (days), each over its own part of the grid: speeds [rpm],
+#: ΔP [bar], quadrants; their oil temperatures are not in the table (the spec assumes 50 °C)
+RECORDINGS = (("day1", [100, 500, 1000, 2000, 3000], [20, 80, 160, 240, 320], 4),
+              ("day2", [500, 1500, 2500], [40, 120, 200, 280], 2),
+              ("day3", [300, 1000, 3000], [60, 160, 300], 4))
+
+
+def _recordings(temps, spec, rng):
+    """The base model's map of :data:`RECORDINGS` at oil temperatures ``temps`` [°C], written without
+    a temperature column (a ``recording`` column instead) and read back: (table, recording labels)."""
+    import tempfile
+
+    import pandas as pd
+
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.io.tables import read_table
+
+    truth = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.15,
+             "KL_b1": 0.08, "KAB": 2e-14}
+    parts = []
+    for (label, speeds, dps, quadrants), temp in zip(RECORDINGS, temps):
+        df = simulate_map(spec, truth, map_grid(speeds, dps, quadrants), temp_C=temp, rng=rng,
+                          noise={"torque_Nm": 0.3, "q_a_lpm": 0.05, "q_b_lpm": 0.05, "q_case_lpm": 0.02})
+        parts.append(df.drop(columns=["oil_temp_C"]).assign(recording=label, point_id=label + ":" + df["point_id"]))
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "map.csv"
+        pd.concat(parts).to_csv(path, index=False)
+        table = read_table(path, spec)
+    return table, table.recordings()
+
+
 FOREIGN_MAP = """
 # another maker's test report: pump sign, absolute pressures, speed in rad/s
 convention = "pump"
@@ -212,6 +243,10 @@ def run(quick: bool = False) -> str:
     for mid in mechs:
         cases.append((f"synthetic: Bartos{' + ' + mid if mid else ' only'}", _synthetic(mid, spec, rng), spec,
                       not quick or mid is not None, None))
+    for temps in ([(50.0, 54.0, 47.0)] if quick else [(50.0, 54.0, 47.0), (50.0, 50.0, 50.0)]):
+        t, g = _recordings(temps, spec, rng)
+        cases.append((f"synthetic: Bartos, 3 recordings at {', '.join(f'{x:g}' for x in temps)} °C, no temperature "
+                      f"column", t, spec, True, g))
     for mid in [None, "film_heating"] if quick else [None, "film_heating", "hydrodynamic_torque"]:
         t, s28 = _foreign(mid, rng)
         cases.append((f"foreign map (28 cm³/rev, pump sign, absolute pressures, .xlsx): Bartos"
@@ -227,7 +262,9 @@ def run(quick: bool = False) -> str:
            "0.05 L/min (ports), 0.02 L/min (case); the mechanism at 3× its catalog's typical size.  Foreign maps "
            "(a map never tuned on, issue 20): a 28 cm³/rev 7-piston unit, uneven grid 50-4500 rpm × 15-380 bar, "
            "18 bar boost, 60 °C, noise 0.05 N·m / 0.02 / 0.01 L/min, written as another maker's .xlsx (pump-sign "
-           "torque and flow, absolute pressures, rad/s) and read through a channel map.", ""]
+           "torque and flow, absolute pressures, rad/s) and read through a channel map.  Recordings: the "
+           "Bartos-only map put together from three recordings (days) over parts of the grid (100, 24 and 36 "
+           "points), with oil temperatures the table does not hold (spec: 50 °C).", ""]
     if not _real_maps():
         out += ["No operating-point table under real_data/ on this branch.", ""]
     for name, table, s, diag, groups in cases:

@@ -56,7 +56,8 @@ def test_held_out_evidence_keeps_a_law_the_bic_alone_would_miss_on_the_mbari_poi
     (the untracked oil warms): film heating lowers the BIC by less than the 10 of strong-enough
     evidence, yet removes over 10 % of the torque's 5-fold held-out squared error and costs the
     flows nothing, so it is kept on that evidence; the model with it predicts a whole recording it
-    was not fitted on better than without (catalog restricted to what diagnose selects there)."""
+    was not fitted on better than without (catalog restricted to what diagnose selected there before
+    it knew the recordings' oil temperatures: tests/test_recording_temperature.py)."""
     import pandas as pd
 
     from motorid.comparators.evaluate import MotoridModel, held_out

@@ -267,6 +267,24 @@ def test_each_comparator_recovers_its_own_law(name):
         assert np.max(np.abs(w["torque"] - t.measured["torque"])) > 1e-3 * np.ptp(t.measured["torque"])
 
 
+def test_jeong_takes_no_speed_scale_its_fitted_points_cannot_see():
+    """Fitted on fast points only, Jeong's e^{−|ω|/ω_s} with a small ω_s is 10⁻⁴⁵ there: such a
+    scale is not tried (it got a coefficient of 10⁴⁰ and predicted 10²⁸ % of span at slow points)."""
+    from motorid.comparators import Jeong
+    from motorid.comparators.base import Operating
+
+    t = _law_table()
+    op = Operating(t)
+    t.measured = {c: np.asarray(v, float) for c, v in t.measured.items()}
+    t.measured["torque"] = op.d * op.dp + 0.3 * np.sign(op.omega) * np.random.default_rng(3).standard_normal(len(t))
+    fast = np.abs(op.omega) > np.median(np.abs(op.omega))
+    model = Jeong().fit(t.subset(fast))
+    w_min = np.min(np.abs(op.omega[fast]))
+    assert np.exp(-w_min / model.shape["torque"]) >= 1e-6
+    pred = model.predict(t.subset(~fast))["torque"]
+    assert np.all(np.abs(pred - t.measured["torque"][~fast]) < 10 * np.ptp(t.measured["torque"]))
+
+
 def test_polynomial_map_recovers_a_polynomial_and_picks_its_degree():
     from motorid.comparators import Polynomial
     from motorid.comparators.base import Operating, channels_from_losses

@@ -94,6 +94,8 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
         print("no mechanism earns its place on the table (ΔBIC below --min-evidence)")
     for m in doc["mechanisms"]:
         print(f"found {m['id']} ({m['name']})")
+        if m.get("description"):
+            print(f"  {m['description']}")
     for u in doc["unexplained"]:
         print(f"unexplained: {u['description']}")
     if doc["comparison"]:

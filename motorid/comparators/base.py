@@ -96,6 +96,11 @@ class LossModel:
     def flow_terms(self, op: Operating, h) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def usable(self, kind, op: Operating, h, ok) -> bool:
+        """Whether the shape ``h`` may be fitted on the points ``ok`` (a term that vanishes on all of
+        them would get an arbitrary coefficient, and blow up where it does not vanish)."""
+        return True
+
     def _terms(self, kind, op, h):
         return self.torque_terms(op, h) if kind == "torque" else self.flow_terms(op, h)
 
@@ -111,12 +116,15 @@ class LossModel:
             kind = "torque" if key == "torque" else "flow"
             best = None
             for h in self.shapes:
+                if not self.usable(kind, op, h, ok):
+                    continue
                 A = self._terms(kind, op, h)[ok]
                 c = _lstsq(A, target[ok])
                 sse = float(np.sum((A @ c - target[ok]) ** 2))
                 if best is None or sse < best[0]:
                     best = (sse, h, c)
-            self.shape[key], self.coef[key] = best[1], best[2]
+            if best is not None:
+                self.shape[key], self.coef[key] = best[1], best[2]
         return self
 
     def predict(self, table, density=None) -> dict:

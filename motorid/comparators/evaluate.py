@@ -67,10 +67,11 @@ def _predict_split(model, table, train, test) -> dict:
     return fitted.predict(table.subset(test))
 
 
-def held_out(model, table, k: int = 5, seed: int = 0, groups=None) -> dict:
+def held_out(model, table, k: int = 5, seed: int = 0, groups=None, extrapolate: bool = True) -> dict:
     """The K-fold and extrapolation errors of ``model`` on ``table`` (see the module's words);
     with ``groups`` (a label per point, e.g. the recording it came from) also the error of
-    predicting each group from a fit on the others ("leave_one_group_out")."""
+    predicting each group from a fit on the others ("leave_one_group_out"); ``extrapolate``
+    False: the K-fold error alone."""
     n = len(table)
     span = table.measured
     t0 = time.time()
@@ -82,7 +83,8 @@ def held_out(model, table, k: int = 5, seed: int = 0, groups=None) -> dict:
         for c in CHANNELS:
             pred[c][fold] = p[c]
     out = {"kfold": rms_errors(table.measured, pred, span), "k": max(2, min(k, n))}
-    for name, values in (("extrapolate_pressure", table.p_a - table.p_b), ("extrapolate_speed", table.speed)):
+    splits = (("extrapolate_pressure", table.p_a - table.p_b), ("extrapolate_speed", table.speed))
+    for name, values in splits if extrapolate else ():
         train, test = extrapolation_split(values)
         if train.sum() < 4 or test.sum() < 1:
             out[name] = {}
@@ -135,12 +137,14 @@ class _FittedMotorid:
         self.owner = owner
 
     def predict(self, table) -> dict:
-        from motorid.identify.tables import point_channels, table_samples
+        from motorid.identify.tables import bind_mechanisms, point_channels, table_samples
 
         o = self.owner
         p = self.fit.ls.params_all
         disp = table.displacement if table.variable_displacement else None
-        ch = point_channels(p, o.spec, table_samples(o.spec, table), disp, o.mechanisms)
+        # the mechanisms as the fit used them (set for its training points), looked up at these points
+        ch = point_channels(p, o.spec, table_samples(o.spec, table), disp,
+                            bind_mechanisms(self.fit.ls.mechanisms, table))
         out = dict(zip(CHANNELS, (np.asarray(v) for v in ch)))
         ls = self.fit.ls
         # a channel whose parameters the training points did not identify is not predicted

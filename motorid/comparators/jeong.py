@@ -37,5 +37,10 @@ class Jeong(LossModel):
         return np.column_stack([op.d * op.mu * op.W, op.d * op.P, op.d * op.P * op.W / OMEGA_REF,
                                 np.ones(len(op)), np.exp(-op.W / h)])
 
+    def usable(self, kind, op, h, ok) -> bool:
+        # e^{−|ω|/ω_s} below 10⁻⁶ at every fitted point: the term is not seen there (its coefficient
+        # would be any number, and 10²⁰ N·m at a slower point held out)
+        return kind != "torque" or float(np.max(np.exp(-op.W[ok] / h), initial=0.0)) >= 1e-6
+
     def flow_terms(self, op, h):
         return np.column_stack([op.d * op.P / op.mu, op.d ** (2 / 3) * np.sqrt(2 * op.P / op.rho)])

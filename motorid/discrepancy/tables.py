@@ -52,8 +52,8 @@ def held_out_gains(table, spec, current: list, mech) -> dict:
     with ``current`` (parameters refitted per fold; negative: worse)."""
     from motorid.comparators.evaluate import MotoridModel, held_out
 
-    before = held_out(MotoridModel(spec, current), table)["kfold"]
-    after = held_out(MotoridModel(spec, current + [mech]), table)["kfold"]
+    before = held_out(MotoridModel(spec, current), table, extrapolate=False)["kfold"]
+    after = held_out(MotoridModel(spec, current + [mech]), table, extrapolate=False)["kfold"]
     return {c: 1.0 - (after[c]["rms"] / before[c]["rms"]) ** 2 for c in before
             if c in after and before[c]["rms"] and after[c]["rms"] is not None}
 
@@ -71,6 +71,12 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
     from motorid.identify.tables import fit_table
 
     cands = list(candidates if candidates is not None else all_mechanisms())
+    if candidates is None:  # the table's own: an oil temperature its recordings did not record
+        from motorid.physics.recording_temperature import RecordingTemperature
+
+        per_recording = RecordingTemperature.for_table(table)
+        if per_recording is not None:
+            cands.append(per_recording)
     current = []
     joint = dict(dataset=dataset, log_fit=log_fit)
     fit0 = fit_table(table, spec, **joint)
@@ -130,8 +136,17 @@ def diagnosis_table_document(dg: dict, spec) -> dict:
         for k in m.parameters:
             info = m.parameters[k]
             params[k] = {"value": fit.ls.values.get(k), "std": fit.ls.std.get(k), "unit": info.unit}
-        mechs.append({"id": m.id, "name": getattr(m, "name", m.id), "reference": getattr(m, "reference", ""),
-                      "parameters": params, "signature": getattr(m, "signature", "")})
+        entry = {"id": m.id, "name": getattr(m, "name", m.id), "reference": getattr(m, "reference", ""),
+                 "parameters": params, "signature": getattr(m, "signature", "")}
+        try:
+            entry["description"] = m.describe({k: fit.ls.params_all[k] for k in m.parameters}, spec)
+        except (NotImplementedError, KeyError, TypeError, ValueError):
+            pass
+        if hasattr(m, "temperature_differences"):
+            entry["temperature_difference_K"] = {
+                label: {"value": dt, "std": sd} for label, (dt, sd) in
+                m.temperature_differences(fit.ls.params_all, spec, fit.ls.covariance, fit.ls.free).items()}
+        mechs.append(entry)
     chans = {}
     for c in ("torque", "q_a", "q_b", "q_case"):
         r0, r1 = base.table_residuals[c], fit.table_residuals[c]

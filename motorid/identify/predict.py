@@ -104,10 +104,11 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
     for torque and flows, its prediction band (``_pi_lo95``, ``_pi_hi95``), the
     operating ``mode`` (motor / pump / none) and a ``note``.
     """
-    from motorid.identify.tables import point_channels, table_samples
+    from motorid.identify.tables import bind_mechanisms, point_channels, table_samples
 
     doc, spec, mechanisms = result if isinstance(result, tuple) else load_result(result, spec)
     params, names, cov, unidentified = fitted_parameters(doc, spec, mechanisms)
+    mechanisms = bind_mechanisms(mechanisms, table)
     samples = table_samples(spec, table)
     disp = np.asarray(table.displacement, float)
     disp_arg = disp if table.variable_displacement else None

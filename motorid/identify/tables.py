@@ -84,8 +84,16 @@ def point_channels(params: dict, spec, samples, displacement=None, mechanisms: S
     """
     if displacement is not None:
         spec = dataclasses.replace(spec, displacement=jnp.asarray(displacement, dtype=jnp.float64)[:, None])
+    for mech in mechanisms:  # conditions the table did not record (bind_mechanisms: to these points)
+        samples = mech.table_conditions(params, spec, samples)
     ch = model.predict(params, spec, samples, mechanisms)
     return Channels(*(jnp.mean(c, axis=-1) for c in ch))
+
+
+def bind_mechanisms(mechanisms: Sequence, table) -> tuple:
+    """``mechanisms`` with those that belong to a table's points (``bound_to``, e.g. an oil
+    temperature per recording) bound to the points of ``table``."""
+    return tuple(m.bound_to(table) if hasattr(m, "bound_to") else m for m in mechanisms)
 
 
 # ----------------------------------------------------------------------------- what a table identifies
@@ -171,7 +179,7 @@ class _Residual:
 
     def __init__(self, spec, table, names, free, held, scales, mechanisms, dataset=None):
         self.spec, self.free, self.held = spec, list(free), dict(held)
-        self.mechanisms = tuple(mechanisms)
+        self.mechanisms = bind_mechanisms(mechanisms, table) if table is not None else tuple(mechanisms)
         self.scales = np.asarray(scales, dtype=float)
         self.samples = table_samples(spec, table) if table is not None else None
         disp = None
@@ -327,6 +335,11 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         reasons = {k: f"{v}; and from the logs: {from_logs[k]}" for k, v in reasons.items() if k in from_logs}
     n = len(table)
     train = np.ones(n, bool) if train is None else np.asarray(train, bool)
+    # a mechanism of the table's own points, set for the points fitted (e.g. the recordings they hold)
+    mechanisms = tuple(m.for_training(table, train) if hasattr(m, "for_training") else m for m in mechanisms)
+    for mech in mechanisms:
+        if hasattr(mech, "table_reasons"):
+            reasons.update({k: v for k, v in mech.table_reasons(table, train).items() if k not in reasons})
     start = _linear_start(spec, table.subset(train), names, mechanisms)
     if log_fit is not None:
         start.update({k: v for k, v in log_fit.params_all.items() if v is not None and k in names})

@@ -34,6 +34,8 @@ _DISPLACEMENT_UNITS = {"cm3": 1e-6, "cc": 1e-6, "ml": 1e-6, "cm3_rev": 1e-6, "cc
 _DP_HEADERS = {f"{b}_{u}": u for b in ("dp", "delta_p", "deltap", "p_ab") for u in _PRESSURE_UNITS}
 _ID_HEADERS = ("point_id", "pointid", "point", "id")
 _COUNT_HEADERS = ("n_samples", "samples", "n", "count")
+#: a text column naming the recording (test session) each point was averaged from
+_RECORDING_HEADERS = ("recording", "session")
 
 
 @dataclass
@@ -47,7 +49,10 @@ class PointTable:
     absent; relative_sigma : channel → relative σ of each point's mean (from
     ``*_std_*`` / √n_samples, or 1/√n_samples; 1 where the table gives
     neither), normalized to a median of 1; point_id : names; file : source of
-    each point; line : its line in the file.
+    each point; line : its line in the file; recording : the label of the
+    recording (test session) each point comes from, where the table has a
+    ``recording`` column, else None; temperature_assumed : True where the oil
+    temperature was not in the table and was taken from the spec's ``[oil] temp_C``.
     """
 
     point_id: np.ndarray
@@ -65,6 +70,8 @@ class PointTable:
     has_point_id: bool = False
     weights_from: dict = field(default_factory=dict)  # channel → "std columns" / "n_samples" / "none"
     variable_displacement: bool = False
+    recording: np.ndarray | None = None
+    temperature_assumed: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.speed.size)
@@ -81,7 +88,22 @@ class PointTable:
                           take(self.p_case), take(self.temperature), take(self.viscosity),
                           take(self.displacement), {c: take(v) for c, v in self.measured.items()},
                           {c: take(v) for c, v in self.relative_sigma.items()}, take(self.file),
-                          take(self.line), self.has_point_id, dict(self.weights_from), self.variable_displacement)
+                          take(self.line), self.has_point_id, dict(self.weights_from), self.variable_displacement,
+                          None if self.recording is None else take(self.recording),
+                          None if self.temperature_assumed is None else take(self.temperature_assumed))
+
+    def recordings(self) -> np.ndarray:
+        """The recording of each point: the ``recording`` column where the table has one, else its
+        file (every point of a one-file table without the column shares one label)."""
+        if self.recording is not None:
+            return np.asarray(self.recording, dtype=object)
+        return np.asarray(self.file, dtype=object)
+
+    def assumed_temperature(self) -> np.ndarray:
+        """True at the points whose oil temperature was not recorded (taken from the spec)."""
+        if self.temperature_assumed is None:
+            return np.zeros(len(self), bool)
+        return np.asarray(self.temperature_assumed, bool)
 
     def channels(self) -> list:
         """Output channels with at least one reading."""
@@ -155,6 +177,8 @@ def _map_table_columns(path: Path, fields: list):
             put("point_id", j, None, name)
         elif norm in _COUNT_HEADERS:
             put("n_samples", j, None, name)
+        elif norm in _RECORDING_HEADERS:
+            put("recording", j, None, name)
         elif norm in _DP_HEADERS:
             put("dp_Pa", j, _DP_HEADERS[norm], name)
         elif norm.startswith("displacement_") and norm[len("displacement_"):] in _DISPLACEMENT_UNITS:
@@ -204,12 +228,14 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
     if require_outputs and not any(k in found for k in OUTPUTS):
         raise InputError(f"{path}: no output column: a table for a fit needs at least one of torque_Nm, q_a_lpm, "
                          f"q_b_lpm, q_case_lpm")
-    parse_keys = {k: v for k, v in found.items() if k != "point_id"}
+    parse_keys = {k: v for k, v in found.items() if k not in ("point_id", "recording")}
     if "point_id" in found:
         parse_keys["run_id"] = found["point_id"]
+    if "recording" in found:  # text, as the protocol column of a log
+        parse_keys["protocol"] = found["recording"]
     table = _parse_body(path, body, delim, fields, parse_keys, header_line)
     lines = header_line + 1 + np.arange(len(table))
-    numeric = [j for k, (j, _) in parse_keys.items() if k != "run_id"]
+    numeric = [j for k, (j, _) in parse_keys.items() if k not in ("run_id", "protocol")]
     blank = np.all([table[j].isna().to_numpy() for j in numeric], axis=0)
     table, lines = table.loc[~blank].reset_index(drop=True), lines[~blank]
     n = len(table)
@@ -280,7 +306,10 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
             raise InputError(f"{path}: no viscosity column and no [oil] in the motor spec to derive it from the "
                              f"oil temperature")
         mu = np.where(gaps, _oil_viscosity(spec, np.where(gaps, t_fill, 40.0)), mu)
+        assumed = gaps & ~np.isfinite(temperature)
         temperature = np.where(np.isfinite(temperature), temperature, t_fill)
+    else:
+        assumed = np.zeros(n, bool)
 
     if "displacement_m3" in found:
         x, j, unit = column("displacement_m3")
@@ -332,8 +361,14 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
     else:
         ids = np.array([f"{path.name}:{k}" for k in lines], dtype=object)
         has_id = False
+    recording = None
+    if "recording" in found:
+        recording = table[found["recording"][0]].fillna("").astype(str).str.strip().to_numpy(dtype=object)
+        empty = np.flatnonzero(recording == "")
+        if empty.size:
+            raise InputError(f"{path}: column '{fields[found['recording'][0]]}', line {lines[empty[0]]}: empty cell")
     return PointTable(ids, speed, p_a, p_b, p_case, temperature, mu, displacement, measured, rel,
-                      np.array([str(path)] * n, dtype=object), lines, has_id, how, variable)
+                      np.array([str(path)] * n, dtype=object), lines, has_id, how, variable, recording, assumed)
 
 
 def concat_tables(tables: list) -> PointTable:
@@ -349,7 +384,11 @@ def concat_tables(tables: list) -> PointTable:
                       {c: np.concatenate([t.measured[c] for t in tables]) for c in chans},
                       {c: np.concatenate([t.relative_sigma[c] for t in tables]) for c in chans},
                       cat("file"), cat("line"), all(t.has_point_id for t in tables), how,
-                      any(t.variable_displacement for t in tables))
+                      any(t.variable_displacement for t in tables),
+                      # a table without the column: its file names its recording
+                      None if all(t.recording is None for t in tables) else
+                      np.concatenate([t.recordings() for t in tables]),
+                      np.concatenate([t.assumed_temperature() for t in tables]))
 
 
 def _table_map(channels):

@@ -106,6 +106,11 @@ class Mechanism:
         """Add this mechanism's terms to the running channels."""
         return ch
 
+    def table_conditions(self, params: dict, spec, samples: Samples) -> Samples:
+        """Change the operating conditions of an operating-point table's points before the model
+        sees them (e.g. an oil temperature the table did not record); samples are points × angles."""
+        return samples
+
     def static_limit(self, params: dict, spec, events: Samples, limit):
         """Change the static friction limit T_break at breakaway events [N·m]."""
         return limit

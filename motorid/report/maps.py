@@ -187,7 +187,7 @@ def rerender_map_report(out_dir, motor=None) -> Path:
 
     from motorid.errors import InputError
     from motorid.identify.predict import fitted_parameters, load_result
-    from motorid.identify.tables import point_channels, table_samples
+    from motorid.identify.tables import bind_mechanisms, point_channels, table_samples
     from motorid.io.tables import read_tables
     from motorid.io.spec import load_motor_spec
 
@@ -200,7 +200,8 @@ def rerender_map_report(out_dir, motor=None) -> Path:
     table = read_tables(paths, spec)
     params = fitted_parameters(doc, spec, mechanisms)[0]
     ch = point_channels(params, spec, table_samples(spec, table),
-                        table.displacement if table.variable_displacement else None, mechanisms)
+                        table.displacement if table.variable_displacement else None,
+                        bind_mechanisms(mechanisms, table))
     tf = SimpleNamespace(table=table, table_prediction=dict(zip(("torque", "q_a", "q_b", "q_case"),
                                                                 (np.asarray(c) for c in ch))))
     return write_map_report(out_dir, doc, tf, spec)

@@ -55,7 +55,7 @@ def quasi_steady_points(frame: pd.DataFrame) -> pd.DataFrame:
             rows.append({
                 "point_id": f"{run}:{len(rows) + 1}", "recording": str(run),
                 **{k: c[k].mean() for k in ("speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm", "q_a_lpm", "q_b_lpm")},
-                "oil_temp_C": 25.0, "n_samples": len(c), "torque_std_Nm": c["torque_Nm"].std(ddof=1),
+                "n_samples": len(c), "torque_std_Nm": c["torque_Nm"].std(ddof=1),
                 "accel_rpm_s": c["accel_rpm_s"].mean(),
             })
     return pd.DataFrame(rows)
