@@ -63,7 +63,7 @@ def test_the_mechanism_is_offered_only_where_recordings_lack_a_temperature(tmp_p
     table = read_table(path, spec)
     assert table.assumed_temperature().all()
     mech = RecordingTemperature.for_table(table)
-    assert mech.reference == "day1" and mech.labels == ("day2", "day3")  # most points first
+    assert mech.reference_recording == "day1" and mech.labels == ("day2", "day3")  # most points first
     # the same map with its temperature column: nothing to estimate
     df = pd.read_csv(path).assign(oil_temp_C=45.0)
     df.to_csv(tmp_path / "with_temp.csv", index=False)
@@ -205,3 +205,25 @@ def test_a_recording_left_out_of_the_fit_is_predicted_at_the_mean_of_those_fitte
     want = point_channels(TRUTH, spec, table_samples(spec, dataclasses.replace(table, viscosity=table.viscosity * factor)))
     for a, b in zip(got, want):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-18)
+
+
+def test_leaving_out_each_recording_through_one_model_equals_fresh_fits(tmp_path):
+    """Leaving out day1 (the reference) and leaving out day3 free the same parameter (day2's) but not
+    the same parametrization (day3, then day1, carries −Σ): one model's compiled problems must not be
+    shared between such folds (a cache keyed by the free parameters alone fitted the second with the
+    first's, and predicted it with its own)."""
+    from motorid.comparators.evaluate import MotoridModel
+    from motorid.io.tables import read_table
+    from motorid.physics.recording_temperature import RecordingTemperature
+
+    path, spec = _write_map(tmp_path, [d[1] for d in DAYS])
+    table = read_table(path, spec)
+    mech = RecordingTemperature.for_table(table)
+    rec = table.recordings()
+    shared = MotoridModel(spec, [mech])
+    for label in ("day1", "day3", "day2"):
+        train = rec != label
+        a = shared.fit_split(table, train).predict(table.subset(~train))
+        b = MotoridModel(spec, [mech]).fit_split(table, train).predict(table.subset(~train))
+        for c in ("torque", "q_case"):
+            np.testing.assert_allclose(a[c], b[c], rtol=1e-9, err_msg=f"{label} {c}")

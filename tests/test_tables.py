@@ -101,16 +101,17 @@ def test_dp_form_gives_the_same_fit_as_port_pressures(tmp_path):
     from motorid.identify.tables import fit_table
     from motorid.io.tables import read_table
 
-    g = map_grid([200, 1000, 2000], [50, 150, 300], 2)  # P_B = 0 at every point
+    g = map_grid([200, 1000, 2000], [50, 150, 300], 2)  # the low-pressure port at 0 at every point
     df = simulate_map(SPEC, TRUTH, g, noise=NOISE, rng=np.random.default_rng(3))
     ports = read_table(_write(df, tmp_path / "ports.csv"), SPEC)
     dp = df.assign(dp_bar=df.p_a_bar - df.p_b_bar).drop(columns=["p_a_bar", "p_b_bar"])
     dp_t = read_table(_write(dp, tmp_path / "dp.csv"), SPEC)
-    neg = dp_t.p_a < 0  # ΔP < 0 is read as P_A = ΔP, P_B = 0: the same ΔP, another port-pressure sum
+    neg = dp_t.p_b > 0  # ΔP < 0 is read as P_A = 0, P_B = −ΔP: port B high, never below vacuum
     np.testing.assert_allclose(dp_t.p_a - dp_t.p_b, ports.p_a - ports.p_b)
-    assert neg.any() and np.all(dp_t.p_b == 0)
-    a = fit_table(ports.subset(~neg), SPEC).ls
-    b = fit_table(dp_t.subset(~neg), SPEC).ls
+    np.testing.assert_allclose(dp_t.p_a, ports.p_a)
+    assert neg.any() and np.all(dp_t.p_a[neg] == 0) and np.all(dp_t.p_b[~neg] == 0)
+    a = fit_table(ports, SPEC).ls
+    b = fit_table(dp_t, SPEC).ls
     for k in RECOVERED:
         assert b.values[k] == pytest.approx(a.values[k], rel=1e-6)
 
@@ -280,9 +281,9 @@ def test_jeong_takes_no_speed_scale_its_fitted_points_cannot_see():
     fast = np.abs(op.omega) > np.median(np.abs(op.omega))
     model = Jeong().fit(t.subset(fast))
     w_min = np.min(np.abs(op.omega[fast]))
-    assert np.exp(-w_min / model.shape["torque"]) >= 1e-6
+    assert np.exp(-w_min / model.shape["torque"]) >= 1e-2
     pred = model.predict(t.subset(~fast))["torque"]
-    assert np.all(np.abs(pred - t.measured["torque"][~fast]) < 10 * np.ptp(t.measured["torque"]))
+    assert np.all(np.abs(pred - t.measured["torque"][~fast]) < 0.05 * np.ptp(t.measured["torque"]))
 
 
 def test_polynomial_map_recovers_a_polynomial_and_picks_its_degree():

@@ -271,7 +271,12 @@ def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regi
     beta = beta / scale * 1.0
     chosen = [(terms[i - k], float(beta[i])) for i in chosen_idx]
     # coefficients in SI: the columns were divided by σ (weights) and by their RMS (scale)
-    size = float(np.sqrt(np.mean((L[ok][:, [i - k for i in chosen_idx]] @ beta[chosen_idx]) ** 2)))
+    # its size: how far it moves the fitted curve (the base shapes refitted without it), not the term
+    # alone, which a base shape it shares would inflate
+    without = np.zeros(Z.shape[1])
+    without[:k] = np.linalg.lstsq(Z[:, :k], y, rcond=None)[0] / scale[:k]
+    design = np.column_stack([N, L])[ok]
+    size = float(np.sqrt(np.mean((design @ (beta - without)) ** 2)))
     gain = 1.0 - best / base if base > 0 else 0.0
     region_gain = region_gains(Z, y, k, list(chosen_idx), {n: np.asarray(m)[ok] for n, m in (regions or {}).items()})
     return EmpiricalTerm(channel, chosen, float(gain), region_gain, size)

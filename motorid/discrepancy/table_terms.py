@@ -109,7 +109,13 @@ def search(channel: str, table, residual, sigma, where, spec, groups=None):
         if (gain >= MIN_GAIN and outward and min(outward) > 0.0 and np.mean(list(regions.values())) > 0.0
                 and min(regions.values()) > -0.25):
             terms = [(t, float(c)) for (t, _), c in zip(terms, coef)]
-            size = float(np.sqrt(np.mean((np.column_stack([t.values(x) for t, _ in terms]) @ coef) ** 2)))
+            # its size: how far it moves the fitted curve (the base model's own shapes refitted with
+            # and without it), not the term alone, which a shape it shares with them would inflate
+            N = nuisance(channel, x, spec)
+            X = np.column_stack([N] + [t.values(x) for t, _ in terms])
+            with_it = X @ _solve(X * w[:, None], r * w)
+            without = N @ _solve(N * w[:, None], r * w)
+            size = float(np.sqrt(np.mean((with_it - without) ** 2)))
             return EmpiricalTerm(channel, terms, float(gain), regions, size)
     return None
 

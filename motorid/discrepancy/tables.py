@@ -71,7 +71,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
     from motorid.identify.tables import fit_table
 
     cands = list(candidates if candidates is not None else all_mechanisms())
-    if candidates is None:  # the table's own: an oil temperature its recordings did not record
+    if candidates is None and dataset is None:  # the table's own: an oil temperature no recording holds
         from motorid.physics.recording_temperature import RecordingTemperature
 
         per_recording = RecordingTemperature.for_table(table)

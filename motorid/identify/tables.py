@@ -358,7 +358,8 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     cache = {} if _cache is None else _cache
 
     def problem(free_now):
-        key = (tuple(free_now), id(table), id(dataset))
+        key = (tuple(free_now), id(table), id(dataset),  # a fold's own recordings: its own problem
+               tuple((getattr(m, 'fitted', None), getattr(m, 'implied', None)) for m in mechanisms))
         if key not in cache:
             held = {k: float(start.get(k, 0.0) or 0.0) for k in names if k not in free_now}
             scales = [abs(model.parameter_info(k, mechanisms).typical) or 1.0 for k in free_now]
@@ -445,6 +446,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
             warnings.append(f"{k}: standard error exceeds the value; the data barely constrain it")
     if not converged:
         warnings.append("the table fit stopped before converging (scipy least_squares, max_nfev)")
+    warnings += list(getattr(table, "notes", []))
     resid = {c: table.measured[c] - pred[c] for c in TABLE_CHANNELS}
     sig = {c: point_sigma(c) for c in TABLE_CHANNELS}
     tnoise = {c: (sigma_c[c] if np.isfinite(table.measured[c]).any() else None) for c in TABLE_CHANNELS}

@@ -151,6 +151,8 @@ def sniff_text(text: str, delimiter=None, decimal=None, header_row=None):
 
     hdelim = pick(header)
     ddelim = delimiter if delimiter is not None else pick(data) if data else hdelim
+    if delimiter is None and hdelim in (";", "\t", "|") and data.count(hdelim) == header.count(hdelim):
+        ddelim = hdelim  # "100,0;20,0" under "speed_rpm;p_a_bar": decimal commas, not comma-separated
     if ddelim == " ":
         ddelim = None
     if ddelim == "," and hdelim == "," and data and data.count(",") > header.count(","):

@@ -23,7 +23,7 @@ import numpy as np
 
 from motorid.errors import InputError
 from motorid.io.logs import (_BY_SI, _HEADERS, _NA_STRINGS, _PRESSURE_UNITS, _oil_viscosity, _parse_body,
-                          _read_text, _split_header, normalize_header)
+                          _read_text, _split_header, _unit_hint, normalize_header)
 
 #: the outputs a table may give, SI column of the logs → channel name of the fit
 OUTPUTS = {"torque_Nm": "torque", "q_a_m3_s": "q_a", "q_b_m3_s": "q_b", "q_case_m3_s": "q_case"}
@@ -34,6 +34,10 @@ _DISPLACEMENT_UNITS = {"cm3": 1e-6, "cc": 1e-6, "ml": 1e-6, "cm3_rev": 1e-6, "cc
 _DP_HEADERS = {f"{b}_{u}": u for b in ("dp", "delta_p", "deltap", "p_ab") for u in _PRESSURE_UNITS}
 _ID_HEADERS = ("point_id", "pointid", "point", "id")
 _COUNT_HEADERS = ("n_samples", "samples", "n", "count")
+#: below this |speed| a point is at rest [rad/s] (0.01 rpm)
+STALL_SPEED = 1e-3
+#: gauge pressure of a perfect vacuum, with 0.1 bar for a transducer's zero error [Pa]
+VACUUM_GAUGE_PA = 1.01325e5 + 1e4
 #: a text column naming the recording (test session) each point was averaged from
 _RECORDING_HEADERS = ("recording", "session")
 
@@ -72,6 +76,7 @@ class PointTable:
     variable_displacement: bool = False
     recording: np.ndarray | None = None
     temperature_assumed: np.ndarray | None = None
+    notes: list = field(default_factory=list)  # what the reader set aside, in words
 
     def __len__(self) -> int:
         return int(self.speed.size)
@@ -90,7 +95,8 @@ class PointTable:
                           {c: take(v) for c, v in self.relative_sigma.items()}, take(self.file),
                           take(self.line), self.has_point_id, dict(self.weights_from), self.variable_displacement,
                           None if self.recording is None else take(self.recording),
-                          None if self.temperature_assumed is None else take(self.temperature_assumed))
+                          None if self.temperature_assumed is None else take(self.temperature_assumed),
+                          list(self.notes))
 
     def recordings(self) -> np.ndarray:
         """The recording of each point: the ``recording`` column where the table has one, else its
@@ -191,6 +197,15 @@ def _map_table_columns(path: Path, fields: list):
             q, unit = _HEADERS[norm]
             if q.si in OUTPUTS or q.si in _INPUT_SI:
                 put(q.si, j, unit, name)
+    used = {j for j, _ in found.values()}
+    for j, name in enumerate(fields):  # a channel in a unit motorid does not know: not dropped in silence
+        norm = normalize_header(name) if name else ""
+        q = _unit_hint(norm) if j not in used and norm and "_std" not in norm else None
+        if q is not None and any(norm.endswith("_" + normalize_header(u)) for u in q.units):
+            q = None  # 'torque_setpoint_Nm', 'q_b_set_lpm': a known unit, a channel of its own (kept, ignored)
+        if q is not None and q.si in OUTPUTS and q.si not in found:
+            raise InputError(f"{path}: column '{name}' seems to be the {q.words}, but its unit suffix is not one "
+                             f"motorid knows (such as {q.hint}): rename it, or read the file with a channel map")
     if "speed_rad_s" not in found:
         raise InputError(f"{path}: missing required column 'speed_rpm' (shaft speed, any unit suffix such as "
                          f"_rpm, _rad_s)")
@@ -259,13 +274,19 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
         return conv(x) if callable(conv) else x * conv
 
     speed = convert("speed_rad_s", required("speed_rad_s"))
-    if "dp_Pa" in found:
-        p_a = required("dp_Pa") * _PRESSURE_UNITS[found["dp_Pa"][1]]
-        p_b = np.zeros(n)
+    if "dp_Pa" in found:  # the low-pressure port at 0: port A high where ΔP > 0, port B where ΔP < 0
+        dp = required("dp_Pa") * _PRESSURE_UNITS[found["dp_Pa"][1]]
+        p_a, p_b = np.maximum(dp, 0.0), np.maximum(-dp, 0.0)
     else:
         p_a = convert("p_a_Pa", required("p_a_Pa"))
         p_b = convert("p_b_Pa", required("p_b_Pa"))
     p_case = convert("p_case_Pa", np.nan_to_num(column("p_case_Pa")[0])) if "p_case_Pa" in found else np.zeros(n)
+    for key, x in (("p_a_Pa", p_a), ("p_b_Pa", p_b), ("p_case_Pa", p_case)):
+        below = np.flatnonzero(x < -VACUUM_GAUGE_PA)
+        if below.size and key in found:
+            raise InputError(f"{path}: column '{fields[found[key][0]]}', line {lines[below[0]]}: a gauge pressure "
+                             f"below vacuum ({x[below[0]] / 1e5:.3g} bar; absolute pressures need a channel map "
+                             f"with absolute = true)")
 
     temperature = np.full(n, np.nan)
     if "oil_temp_C" in found:
@@ -361,14 +382,20 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
     else:
         ids = np.array([f"{path.name}:{k}" for k in lines], dtype=object)
         has_id = False
+    notes = []
+    stall = np.isfinite(measured["torque"]) & (np.abs(speed) < STALL_SPEED)
+    if stall.any():  # a held shaft's torque is anywhere within its static friction: no running law
+        measured["torque"] = np.where(stall, np.nan, measured["torque"])
+        notes.append(f"{path.name}: {int(stall.sum())} torque reading(s) at zero speed (line {lines[stall][0]} "
+                     f"first) set aside: a held shaft's torque lies anywhere within its static friction, which "
+                     f"a steady table cannot fit (startability runs do: ISO 4392-2); their flows are kept")
     recording = None
     if "recording" in found:
+        # an empty cell: a point of no named recording (never given a recording's own viscosity)
         recording = table[found["recording"][0]].fillna("").astype(str).str.strip().to_numpy(dtype=object)
-        empty = np.flatnonzero(recording == "")
-        if empty.size:
-            raise InputError(f"{path}: column '{fields[found['recording'][0]]}', line {lines[empty[0]]}: empty cell")
     return PointTable(ids, speed, p_a, p_b, p_case, temperature, mu, displacement, measured, rel,
-                      np.array([str(path)] * n, dtype=object), lines, has_id, how, variable, recording, assumed)
+                      np.array([str(path)] * n, dtype=object), lines, has_id, how, variable, recording, assumed,
+                      notes)
 
 
 def concat_tables(tables: list) -> PointTable:
@@ -388,7 +415,8 @@ def concat_tables(tables: list) -> PointTable:
                       # a table without the column: its file names its recording
                       None if all(t.recording is None for t in tables) else
                       np.concatenate([t.recordings() for t in tables]),
-                      np.concatenate([t.assumed_temperature() for t in tables]))
+                      np.concatenate([t.assumed_temperature() for t in tables]),
+                      [note for t in tables for note in t.notes])
 
 
 def _table_map(channels):
@@ -446,7 +474,12 @@ def read_tables(paths, spec=None, require_outputs: bool = True, channels=None) -
     from motorid.io.formats import needs_foreign_reader
 
     out = []
+    seen: dict = {}
     for p in paths:
+        key = Path(p).resolve()
+        if key in seen:
+            raise InputError(f"{p}: table given twice (also as {seen[key]})")
+        seen[key] = p
         if channels is not None or needs_foreign_reader(p):
             out.append(read_mapped_table(p, spec, channels, require_outputs))
         else:

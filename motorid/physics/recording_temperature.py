@@ -34,9 +34,10 @@ offset per recording.  Anything else that scales the viscous torque by recording
 words say so.
 
 This is not a catalog mechanism: it belongs to a table (its parameters are its
-recordings), is offered by ``diagnose`` only where the table holds at least two
-recordings whose oil temperature was not recorded, and is bound to the points of
-a table (:meth:`RecordingTemperature.bound_to`) before the model sees them.
+recordings), is offered by ``diagnose`` on a table alone only where no point holds a
+temperature and at least two recordings have three points or more, and is bound to
+the points of a table (:meth:`RecordingTemperature.bound_to`) before the model sees
+them.
 """
 
 from __future__ import annotations
@@ -63,20 +64,20 @@ class RecordingTemperature(Mechanism):
                "with the oil at different temperatures: a hotter recording shows less viscous torque (growing "
                "with speed) and more leakage, by the same viscosity factor. "
                "One viscosity per recording, relative to the recording with the most points, takes it.")
-    reference = ("Bartos 1992, Eq. 24 (viscous torque K_v D μ ω) and Eq. 46-61 (laminar leakage ∝ 1/μ); "
+    reference = ("Bartos 1992, Eq. 24 (viscous torque K_v D μ ω) and Eq. 52-58 (laminar leakage to the case and across the ports ∝ 1/μ); "
                  "ASTM D341 (viscosity-temperature charts, the Walther equation); ISO 4409:2019 §6 "
                  "(the oil temperature to be held and recorded for each test point)")
     signature = ("running torque residual that grows with speed, one level per recording, the same at every "
                  "pressure (and the leakage share of the flows, opposite in sign); gone within a recording")
     sensor = False
 
-    def __init__(self, labels, reference, index=None, fitted=None, implied=None):
+    def __init__(self, labels, reference_recording, index=None, fitted=None, implied=None):
         self.labels = tuple(str(v) for v in labels)  # the recordings with a parameter, in order
-        self.reference = str(reference)
+        self.reference_recording = str(reference_recording)
         self.index = None if index is None else np.asarray(index, dtype=np.int64)
         # the recordings a fit saw (None: all) and the one whose s is −Σ of theirs (the reference where seen)
         self.fitted = None if fitted is None else frozenset(map(str, fitted))
-        self.implied = self.reference if implied is None else str(implied)
+        self.implied = self.reference_recording if implied is None else str(implied)
         self.parameters = {self.key(v): ParameterInfo(
             "-", f"ln(μ/μ_assumed) of recording '{v}' (the recordings' mean at the assumed temperature)",
             False, 0.1)
@@ -88,7 +89,7 @@ class RecordingTemperature(Mechanism):
         return f"recording_temperature.{label}"
 
     def _copy(self, **changes):
-        state = dict(labels=self.labels, reference=self.reference, index=self.index, fitted=self.fitted,
+        state = dict(labels=self.labels, reference_recording=self.reference_recording, index=self.index, fitted=self.fitted,
                      implied=self.implied)
         state.update(changes)
         return type(self)(**state)
@@ -96,10 +97,14 @@ class RecordingTemperature(Mechanism):
     @classmethod
     def for_table(cls, table):
         """The mechanism for ``table``, or None where it has fewer than two recordings of at least
-        :data:`MIN_POINTS` points each whose temperature was assumed."""
+        :data:`MIN_POINTS` points, or where any point's temperature was recorded (a measured
+        temperature pins K_v and K_L0, and the recordings' mean is then not free to stand for
+        the assumed temperature)."""
         rec = table.recordings()
         assumed = table.assumed_temperature()
-        labels, counts = np.unique(rec[assumed], return_counts=True)
+        if not assumed.all():
+            return None
+        labels, counts = np.unique(rec[assumed & (rec != "")], return_counts=True)  # "": no recording named
         labels, counts = labels[counts >= MIN_POINTS], counts[counts >= MIN_POINTS]
         if labels.size < 2:
             return None
@@ -113,7 +118,7 @@ class RecordingTemperature(Mechanism):
         if table is None:
             return self._copy(index=None)
         rec = table.recordings()
-        pos = {self.reference: 0, **{v: i + 1 for i, v in enumerate(self.labels)}}
+        pos = {self.reference_recording: 0, **{v: i + 1 for i, v in enumerate(self.labels)}}
         unknown = len(self.labels) + 1
         assumed = table.assumed_temperature()
         index = np.array([pos.get(str(v), unknown) if a else unknown for v, a in zip(rec, assumed)], dtype=np.int64)
@@ -124,8 +129,8 @@ class RecordingTemperature(Mechanism):
         such a point is taken at the assumed temperature (the mean of those seen), and where the
         reference is not seen, the seen recording with the most points carries −Σ of the others."""
         rec = table.recordings()[np.asarray(train, bool) & table.assumed_temperature()]
-        seen = {v: int(np.sum(rec == v)) for v in (self.reference,) + self.labels if np.any(rec == v)}
-        implied = self.reference if self.reference in seen or not seen else max(sorted(seen), key=seen.get)
+        seen = {v: int(np.sum(rec == v)) for v in (self.reference_recording,) + self.labels if np.any(rec == v)}
+        implied = self.reference_recording if self.reference_recording in seen or not seen else max(sorted(seen), key=seen.get)
         return self._copy(fitted=frozenset(seen), implied=implied).bound_to(table)
 
     def _seen(self, label: str) -> bool:
@@ -136,9 +141,9 @@ class RecordingTemperature(Mechanism):
         :meth:`for_training`'s mechanism)."""
         out = {self.key(v): f"recording '{v}' has no point in the fitted set (its points are taken at the "
                             f"assumed oil temperature, the mean of the others)" for v in self.labels if not self._seen(v)}
-        if self.implied != self.reference:
+        if self.implied != self.reference_recording:
             out[self.key(self.implied)] = (f"minus the sum of the other recordings' (the reference "
-                                           f"'{self.reference}' has no point in the fitted set)")
+                                           f"'{self.reference_recording}' has no point in the fitted set)")
         return out
 
     def table_conditions(self, params, spec, samples):
@@ -151,7 +156,7 @@ class RecordingTemperature(Mechanism):
         free = {v: jnp.asarray(params[self.key(v)], dtype=jnp.float64) for v in self.labels
                 if self._seen(v) and v != self.implied}
         implied = -sum(free.values(), zero)
-        names = (self.reference,) + self.labels
+        names = (self.reference_recording,) + self.labels
         shift = jnp.stack([implied if v == self.implied and self._seen(v) else free.get(v, zero) for v in names]
                           + [zero])  # the reference, the labels, an unknown recording
         factor = jnp.exp(shift[self.index])
@@ -165,23 +170,26 @@ class RecordingTemperature(Mechanism):
         return {k: 0.0 for k in self.parameters}
 
     def shifts(self, values: dict, covariance=None, names=None) -> dict:
-        """recording → (s_r, its std or None) [-], the reference's s = −Σ of the others; std from
-        ``covariance`` over ``names`` (the fit's free parameters) where given."""
-        keys = [self.key(v) for v in self.labels]
-        out = {v: (float(values[k]), None) for v, k in zip(self.labels, keys)}
-        ref = -sum(s for s, _ in out.values())
-        ref_sd = None
-        if covariance is not None and names is not None:
+        """recording → (s_r, its std or None) [-] as the fit used them (:meth:`for_training`): the
+        implied recording's s = −Σ of the other seen ones, an unseen one 0; std from ``covariance``
+        over ``names`` (the fit's free parameters) where given."""
+        every = (self.reference_recording,) + self.labels
+        free = [v for v in self.labels if self._seen(v) and v != self.implied]
+        out = {v: (0.0, None) for v in every}
+        for v in free:
+            out[v] = (float(values[self.key(v)]), None)
+        cov = None if covariance is None or names is None else np.asarray(covariance, float)
+        idx = {}
+        if cov is not None:
             names = list(names)
-            cov = np.asarray(covariance, float)
-            idx = [names.index(k) if k in names else None for k in keys]
-            for v, i in zip(self.labels, idx):
-                if i is not None:
-                    out[v] = (out[v][0], float(np.sqrt(max(cov[i, i], 0.0))))
-            ii = [i for i in idx if i is not None]
-            if ii:
-                ref_sd = float(np.sqrt(max(cov[np.ix_(ii, ii)].sum(), 0.0)))
-        return {self.reference: (ref, ref_sd), **out}
+            idx = {v: names.index(self.key(v)) for v in free if self.key(v) in names}
+            for v, i in idx.items():
+                out[v] = (out[v][0], float(np.sqrt(max(cov[i, i], 0.0))))
+        if self._seen(self.implied):
+            ii = list(idx.values())
+            sd = float(np.sqrt(max(cov[np.ix_(ii, ii)].sum(), 0.0))) if ii else None
+            out[self.implied] = (-sum(out[v][0] for v in free), sd)
+        return out
 
     def temperature_differences(self, values: dict, spec, covariance=None, names=None) -> dict:
         """recording → (ΔT [K] against the assumed temperature, its std [K] or None) through the

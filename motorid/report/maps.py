@@ -56,9 +56,12 @@ def plot_efficiency_maps(table, predicted: dict):
         ok = np.isfinite(meas[k]) & np.isfinite(pred[k])
         if ok.sum() < 4:
             continue
-        tri = mtri.Triangulation(x[ok], y[ok])
-        q = quadrant[ok][tri.triangles]
-        tri.set_mask(~np.all(q == q[:, :1], axis=1))
+        try:
+            tri = mtri.Triangulation(x[ok], y[ok])
+            q = quadrant[ok][tri.triangles]
+            tri.set_mask(~np.all(q == q[:, :1], axis=1))
+        except (RuntimeError, ValueError):  # one speed or one ΔP: the points lie on lines, no triangles
+            tri = None
         lo = float(np.nanpercentile(np.r_[meas[k][ok], pred[k][ok]], 2))
         hi = float(np.nanpercentile(np.r_[meas[k][ok], pred[k][ok]], 98))
         levels = np.linspace(lo, hi, 12) if hi > lo else None
@@ -70,10 +73,13 @@ def plot_efficiency_maps(table, predicted: dict):
                 (res, f"{sym} measured − predicted", "RdBu_r", np.linspace(-lim, lim, 13)))):
             ax = axes[r, c]
             try:
+                if tri is None:
+                    raise ValueError("no triangulation")
                 cs = ax.tricontourf(tri, vals, levels=lev, cmap=cmap, extend="both")
                 fig.colorbar(cs, ax=ax, shrink=0.85)
-            except ValueError:  # all triangles masked (points on a line)
-                ax.scatter(x[ok], y[ok], c=vals, cmap=cmap, s=12)
+            except ValueError:  # all triangles masked, or none (points on a line): the points, coloured
+                sc = ax.scatter(x[ok], y[ok], c=vals, cmap=cmap, s=12)
+                fig.colorbar(sc, ax=ax, shrink=0.85)
             ax.plot(x[ok], y[ok], ".", color="k", ms=2)
             ax.axhline(0, color="k", lw=0.6)
             ax.axvline(0, color="k", lw=0.6)

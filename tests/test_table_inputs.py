@@ -1,0 +1,146 @@
+"""Tables as users bring them (found by trying motorid as a new user would, 2026-11-26): a
+European CSV export, a signed ΔP column, a unit suffix motorid does not know, points at rest,
+a single-speed sweep in the report, a partly filled temperature column, a table given twice."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from motorid.errors import InputError
+
+MOTOR = """
+[motor]
+name = "map-9"
+pistons = 9
+displacement_cm3 = 80.0
+[oil]
+name = "ISO VG 46"
+nu40_cSt = 46.0
+nu100_cSt = 6.8
+density15_kg_m3 = 875.0
+temp_C = 50.0
+"""
+TRUTH = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.15,
+         "KL_b1": 0.08, "KAB": 2e-14}
+
+
+@pytest.fixture
+def made(tmp_path):
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.io.spec import load_motor_spec
+
+    (tmp_path / "motor.toml").write_text(MOTOR)
+    spec = load_motor_spec(tmp_path / "motor.toml")
+    df = simulate_map(spec, TRUTH, map_grid([300, 1000, 2000], [50, 150, 250], 4), temp_C=50.0,
+                      noise={"torque_Nm": 0.1, "q_a_lpm": 0.02, "q_b_lpm": 0.02, "q_case_lpm": 0.01},
+                      rng=np.random.default_rng(5)).drop(columns=["oil_temp_C"])
+    return tmp_path, spec, df
+
+
+def test_a_semicolon_export_with_decimal_commas_reads_as_the_plain_csv(made):
+    """'100,0;20,0;…' under 'speed_rpm;p_a_bar;…': more commas than semicolons in the data line, yet
+    the header says ';' (it was read as comma-separated and refused: '100,0' is not a number)."""
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    numeric = df[["speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm"]]
+    numeric.to_csv(d / "plain.csv", index=False)
+    numeric.to_csv(d / "excel.csv", sep=";", decimal=",", index=False)
+    a, b = read_tables([d / "plain.csv"], spec), read_tables([d / "excel.csv"], spec)
+    np.testing.assert_allclose(b.speed, a.speed, rtol=1e-15)
+    np.testing.assert_allclose(b.measured["torque"], a.measured["torque"], rtol=1e-12)
+
+
+def test_a_signed_dp_column_puts_the_pressure_on_the_high_port_and_vacuum_is_refused(made):
+    from motorid.io.tables import read_table
+
+    d, spec, df = made
+    df.assign(dp_bar=df.p_a_bar - df.p_b_bar).drop(columns=["p_a_bar", "p_b_bar"]).to_csv(d / "dp.csv", index=False)
+    df.to_csv(d / "ports.csv", index=False)
+    a, b = read_table(d / "ports.csv", spec), read_table(d / "dp.csv", spec)
+    np.testing.assert_allclose(b.p_a, a.p_a)
+    np.testing.assert_allclose(b.p_b, a.p_b)
+    assert (b.p_a >= 0).all() and (b.p_b >= 0).all() and (b.p_b > 0).any()
+    df.assign(p_b_bar=-0.9).to_csv(d / "suction.csv", index=False)  # a suction port: below atmosphere, above vacuum
+    assert np.allclose(read_table(d / "suction.csv", spec).p_b, -0.9e5)
+    df.assign(p_b_bar=-5.0).to_csv(d / "vacuum.csv", index=False)
+    with pytest.raises(InputError, match=r"vacuum.csv: column 'p_b_bar', line 2: a gauge pressure below vacuum"):
+        read_table(d / "vacuum.csv", spec)
+
+
+def test_an_output_in_a_unit_motorid_does_not_know_is_named_not_dropped(made):
+    from motorid.io.tables import read_table
+
+    d, spec, df = made
+    df.rename(columns={"q_case_lpm": "q_case_cc_s"}).to_csv(d / "cc.csv", index=False)
+    with pytest.raises(InputError, match=r"cc.csv: column 'q_case_cc_s' seems to be the .*unit suffix"):
+        read_table(d / "cc.csv", spec)
+    # a qualified channel in a known unit is a column of its own, kept and ignored
+    df.drop(columns=["torque_Nm"]).assign(torque_setpoint_Nm=1.0, q_b_set_lpm=2.0).to_csv(d / "set.csv", index=False)
+    assert np.isnan(read_table(d / "set.csv", spec).measured["torque"]).all()
+    df.rename(columns={"torque_Nm": "torque"}).to_csv(d / "bare.csv", index=False)
+    with pytest.raises(InputError, match=r"column 'torque' seems to be the shaft torque"):
+        read_table(d / "bare.csv", spec)
+
+
+def test_torque_at_rest_is_set_aside_with_words_and_its_flows_kept(made):
+    from motorid.identify.tables import fit_table
+    from motorid.io.tables import read_table
+
+    d, spec, df = made
+    rest = df.iloc[:3].assign(speed_rpm=0.0, point_id=["R1", "R2", "R3"])
+    pd.concat([df, rest]).to_csv(d / "rest.csv", index=False)
+    t = read_table(d / "rest.csv", spec)
+    at_rest = np.abs(t.speed) < 1e-3
+    assert at_rest.sum() == 3 and np.isnan(t.measured["torque"][at_rest]).all()
+    assert np.isfinite(t.measured["q_case"][at_rest]).all()
+    assert any("zero speed" in n for n in t.notes)
+    fit = fit_table(t, spec)
+    assert any("zero speed" in w for w in fit.ls.warnings)
+
+
+def test_the_efficiency_maps_of_a_single_speed_sweep_are_drawn_not_a_traceback(made):
+    """One speed: no triangulation exists (qhull refused the points); the maps fall back to points."""
+    from motorid.identify.tables import fit_table
+    from motorid.io.tables import read_table
+    from motorid.report.maps import plot_efficiency_maps
+
+    d, spec, df = made
+    df[df.speed_rpm == 1000].to_csv(d / "one_speed.csv", index=False)
+    t = read_table(d / "one_speed.csv", spec)
+    fit = fit_table(t, spec)
+    plot = plot_efficiency_maps(t, fit.table_prediction)
+    assert plot is not None and plot.facts and all(f["points"] >= 4 for f in plot.facts.values())
+
+
+def test_recording_temperatures_only_where_no_point_has_one_and_empty_cells_are_no_recording(made):
+    """With some temperatures recorded, K_v and K_L0 are pinned and the recordings' mean cannot stand for
+    the assumed temperature: not offered (it gave 8 K for a 4 K difference). An empty recording cell is
+    a point of no named recording."""
+    from motorid.io.tables import read_table
+    from motorid.physics.recording_temperature import RecordingTemperature
+
+    d, spec, df = made
+    days = np.array(["a", "b", "c"])[np.arange(len(df)) % 3]
+    df.assign(recording=days).to_csv(d / "rec.csv", index=False)
+    assert RecordingTemperature.for_table(read_table(d / "rec.csv", spec)) is not None
+    temps = np.where(np.arange(len(df)) % 2 == 0, 50.0, np.nan)
+    df.assign(recording=days, oil_temp_C=temps).to_csv(d / "partial.csv", index=False)
+    assert RecordingTemperature.for_table(read_table(d / "partial.csv", spec)) is None
+    blank = np.where(np.arange(len(df)) < 5, "", days)
+    df.assign(recording=blank).to_csv(d / "blank.csv", index=False)
+    t = read_table(d / "blank.csv", spec)
+    mech = RecordingTemperature.for_table(t)
+    assert "" not in (mech.reference_recording,) + mech.labels
+    assert (mech.index[:5] == len(mech.labels) + 1).all()  # taken at the assumed temperature
+
+
+def test_a_table_given_twice_is_refused(made):
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    df.to_csv(d / "map.csv", index=False)
+    with pytest.raises(InputError, match="table given twice"):
+        read_tables([d / "map.csv", d / ".." / d.name / "map.csv"], spec)
