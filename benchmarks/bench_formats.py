@@ -118,6 +118,28 @@ KINDS = ["TDMS (npTDMS)", "MDF4 (asammdf)", "HDF5 (h5py)", "Parquet (pyarrow)", 
          "CSV ; and decimal comma"]
 
 
+#: a fresh process that reads a file through its map → the samples read (peak RSS measured around it)
+_STREAMED = ("from motorid.io.spec import load_motor_spec; from motorid.io.stream import stream_runs; import sys\n"
+             "spec = load_motor_spec(sys.argv[2])\n"
+             "print(sum(r.n for r in stream_runs([sys.argv[1]], spec, sys.argv[3], progress=False)))")
+_WHOLE = ("from motorid.io.spec import load_motor_spec; from motorid.io.logs import read_logs; import sys\n"
+          "print(len(read_logs([sys.argv[1]], load_motor_spec(sys.argv[2]), channels=sys.argv[3])))")
+#: the formats read in blocks of samples through their channel map (motorid.io.stream.RANGE_FORMATS)
+STREAMED_KINDS = ("TDMS (npTDMS)", "MDF4 (asammdf)", "HDF5 (h5py)")
+
+
+def _memory(path: Path, cmap: Path, motor: Path) -> dict:
+    """Peak RSS [MiB] and wall [s] of reading ``path`` streamed and whole, each a fresh process."""
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    from bench_memory import _measure
+
+    out = {}
+    for how, code in (("streamed", _STREAMED), ("whole", _WHOLE)):
+        wall, rss, text = _measure([sys.executable, "-c", code, str(path), str(motor), str(cmap)])
+        out[how] = (wall, rss, int(text.strip().splitlines()[-1]))
+    return out
+
+
 def run(quick: bool = False) -> str:
     from motorid.io.logs import read_logs
     from motorid.io.spec import load_motor_spec
@@ -127,6 +149,7 @@ def run(quick: bool = False) -> str:
     df = campaign(n)
     raw = foreign(df)
     rows = []
+    memory = {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         csv = folder / "campaign.csv"
@@ -148,6 +171,19 @@ def run(quick: bool = False) -> str:
                 scale = np.nanmax(np.abs(b))
                 worst = max(worst, float(np.nanmax(np.abs(a - b)) / scale))
             rows.append((kind, path.stat().st_size, seconds, worst))
+            if kind in STREAMED_KINDS:
+                del got
+                memory[kind] = _memory(path, cmap, REPO / "synthetic_data" / "demo" / "motor.toml")
+    long_n = 2_000_000 if not quick else 0  # the same at four times the samples: does the memory grow?
+    if long_n:
+        raw_long = foreign(campaign(long_n))
+        with tempfile.TemporaryDirectory() as tmp:
+            path, text = write("HDF5 (h5py)", raw_long, Path(tmp))
+            del raw_long
+            cmap = Path(tmp) / "long.toml"
+            cmap.write_text(text)
+            memory[f"HDF5 (h5py), {long_n:,} samples"] = _memory(path, cmap, REPO / "synthetic_data" / "demo" /
+                                                                 "motor.toml")
     mbari = REPO / "real_data" / "mbari_f11"
     spec_m = load_motor_spec(mbari / "motor.toml")
     t0 = time.perf_counter()
@@ -178,7 +214,22 @@ def run(quick: bool = False) -> str:
         "written as a CSV whose floats read back exactly and read by the CSV reader, so the checks are "
         "the same for all formats; the cost of that second pass is the difference between the rows above "
         "and the plain CSV.",
+        "",
+        "Read in blocks (issue 16): a fit of a long log (cells, above `MOTORID_CELL_ROWS`) takes HDF5, MATLAB "
+        "v7.3, TDMS and MDF4 files through their channel map in blocks of "
+        "`motorid.io.stream.FOREIGN_BLOCK_ROWS` samples (h5py slices, npTDMS `TdmsFile.open`, asammdf record "
+        "ranges), run by run, instead of the whole file.  Each reader a fresh process; peak RSS from the "
+        "kernel (`os.wait4`, through bench_memory's small wrapper):",
+        "",
+        f"({n:,} samples unless the row says otherwise.)",
+        "",
+        "| file | streamed: peak RSS MiB | wall s | whole file: peak RSS MiB | wall s | streamed ÷ whole, memory |",
+        "|---|---:|---:|---:|---:|---:|",
     ]
+    for kind, m in memory.items():
+        (ws, rs, ns), (ww, rw, nw) = m["streamed"], m["whole"]
+        assert ns == nw, (kind, ns, nw)
+        lines.append(f"| {kind} | {rs:,.0f} | {ws:.1f} | {rw:,.0f} | {ww:.1f} | {rs / rw:.2f} |")
     return "\n".join(lines)
 
 

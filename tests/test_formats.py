@@ -190,6 +190,33 @@ def test_each_format_through_a_channel_map_reads_as_its_csv_twin(kind, campaign,
     assert_same_frame(read_logs(path, spec), ref)
 
 
+@pytest.mark.parametrize("kind", ["mat73", "hdf5", "tdms", "mdf"])
+def test_binary_formats_stream_in_blocks_as_they_read_whole(kind, campaign, tmp_path, monkeypatch):
+    """HDF5, MATLAB v7.3, TDMS and MDF4 are read through their channel map in blocks of samples
+    (h5py slices, npTDMS TdmsFile.open, asammdf record ranges): run by run, the same SI columns as
+    the file read whole, bit for bit; and more than one block was read (memory: one block, one run)."""
+    from motorid.io import stream
+    from motorid.io.stream import runs_of_frame, stream_runs
+
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    path, text = write_foreign(kind, raw, tmp_path)
+    cmap = tmp_path / "bench7.toml"
+    cmap.write_text(text)
+    monkeypatch.setattr(stream, "FOREIGN_BLOCK_ROWS", 1000)  # a small block: many blocks, runs across them
+    plan = stream._foreign_plan(path, cmap)
+    assert plan is not None
+    blocks = list(plan[2])
+    assert len(blocks) == math.ceil(len(raw["t"]) / 1000)
+    got = list(stream_runs([path], spec, cmap, progress=False))
+    ref = list(runs_of_frame(read_logs(path, spec, channels=cmap)))
+    assert [r.run_id for r in got] == [r.run_id for r in ref] and len(got) == len(set(raw["RunNo"]))
+    for a, b in zip(got, ref):
+        assert a.protocol == b.protocol
+        for col, v in b.columns.items():
+            np.testing.assert_array_equal(a.columns[col], v, err_msg=f"{kind} {a.run_id} {col}")
+
+
 def test_decimal_comma_csv_with_the_formats_own_headers_needs_no_map(campaign, tmp_path):
     csv, _, _ = campaign
     spec = load_motor_spec(MOTOR)

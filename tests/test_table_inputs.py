@@ -135,6 +135,10 @@ def test_recording_temperatures_only_where_no_point_has_one_and_empty_cells_are_
     mech = RecordingTemperature.for_table(t)
     assert "" not in (mech.reference_recording,) + mech.labels
     assert (mech.index[:5] == len(mech.labels) + 1).all()  # taken at the assumed temperature
+    tiny = np.where(np.arange(len(df)) < 2, "z", days)  # a recording of two points: named, not fitted
+    df.assign(recording=tiny).to_csv(d / "tiny.csv", index=False)
+    t = read_table(d / "tiny.csv", spec)
+    assert "z" not in RecordingTemperature.for_table(t).labels and RecordingTemperature.too_small(t) == ["z"]
 
 
 def test_a_table_given_twice_is_refused(made):

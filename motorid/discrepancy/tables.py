@@ -146,6 +146,7 @@ def diagnosis_table_document(dg: dict, spec) -> dict:
             entry["temperature_difference_K"] = {
                 label: {"value": dt, "std": sd} for label, (dt, sd) in
                 m.temperature_differences(fit.ls.params_all, spec, fit.ls.covariance, fit.ls.free).items()}
+            entry["recordings_too_small"] = m.too_small(fit.table)  # at the assumed temperature
         mechs.append(entry)
     chans = {}
     for c in ("torque", "q_a", "q_b", "q_case"):

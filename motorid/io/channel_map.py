@@ -131,14 +131,16 @@ class ChannelMap:
             return "viscosity_cSt"
         return column
 
-    def apply(self, source, file_label: str) -> pd.DataFrame:
-        """Foreign channels (``source.get(name)``) → a table with the format's columns and units."""
+    def apply(self, source, file_label: str, rows: tuple | None = None) -> pd.DataFrame:
+        """Foreign channels (``source.get(name)``) → a table with the format's columns and units;
+        ``rows`` (start, stop): those samples alone (a source with ``length``; no [grid])."""
         columns: dict = {}
         n = None
         first = None
         grid = self._grid(source, file_label) if self.grid_axes else None
+        read = (lambda name: source.get(name)) if rows is None else (lambda name: source.get(name, *rows))  # noqa: E731
         for col, ch in self.channels.items():
-            raw = grid[col] if grid is not None else source.get(ch.name)
+            raw = grid[col] if grid is not None else read(ch.name)
             raw = np.asarray(raw)
             if grid is None and raw.ndim != 1:
                 raw = np.squeeze(raw)
@@ -153,7 +155,8 @@ class ChannelMap:
             if COLUMNS[col] == "text":
                 columns[col] = _text(raw)
             else:
-                columns[self.output_column(col)] = ch.convert(_numeric(raw, file_label, ch), self.pump)
+                columns[self.output_column(col)] = ch.convert(_numeric(raw, file_label, ch, rows[0] if rows else 0),
+                                                              self.pump)
         if n is None:
             raise InputError(f"{self.path}: [channels] maps no channel")
         for col, value in self.constants.items():
@@ -163,7 +166,7 @@ class ChannelMap:
         if "run_id" not in columns and (self.is_log or "point_id" not in columns):
             columns["run_id"] = np.full(n, _stem(file_label), dtype=object)
         for out, name in self.extra.items():
-            raw = np.asarray(source.get(name))
+            raw = np.asarray(read(name))
             columns[out] = np.squeeze(raw) if raw.ndim > 1 else raw
         frame = pd.DataFrame(columns)
         if grid is not None:  # cells where the map holds no measurement
@@ -211,13 +214,13 @@ def _text(raw: np.ndarray) -> np.ndarray:
     return np.array(out, dtype=object)
 
 
-def _numeric(raw: np.ndarray, file_label: str, ch: Channel) -> np.ndarray:
+def _numeric(raw: np.ndarray, file_label: str, ch: Channel, offset: int = 0) -> np.ndarray:
     if raw.dtype.kind in "fiub":
         return raw.astype(float)
     values = pd.to_numeric(pd.Series(raw.ravel()), errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(np.isnan(values) & ~pd.isna(pd.Series(raw.ravel())).to_numpy())
     if bad.size:
-        raise InputError(f"{file_label}: channel '{ch.name}' ({ch.column}), sample {bad[0] + 1}: "
+        raise InputError(f"{file_label}: channel '{ch.name}' ({ch.column}), sample {offset + bad[0] + 1}: "
                          f"'{raw.ravel()[bad[0]]}' is not a number")
     return values
 

@@ -242,16 +242,43 @@ class _H5:
         name = name.strip().replace(".", "/") if self.matlab else name.strip()
         return f"{self.group}/{name.lstrip('/')}" if self.group and not name.startswith("/") else name.lstrip("/")
 
-    def get(self, name: str):
+    def _dataset(self, name: str):
+        """(dataset, compound field or None) of channel ``name``."""
         full = self._full(name)
         obj = self.file.get(full)
         if obj is None and "/" in full:  # a field of a compound (table) dataset
             parent, fld = full.rsplit("/", 1)
             ds = self.file.get(parent)
             if isinstance(ds, self._h5py.Dataset) and ds.dtype.names and fld in ds.dtype.names:
-                return np.asarray(ds[fld])
+                return ds, fld
         if not isinstance(obj, self._h5py.Dataset):
             raise _not_found(self.path, name, self.names())
+        return obj, None
+
+    def length(self, name: str):
+        """Samples of channel ``name`` where it is one vector (1-D, or 2-D with one axis of 1), else None."""
+        ds, _ = self._dataset(name)
+        shape = tuple(ds.shape)
+        if len(shape) == 1:
+            return shape[0]
+        if len(shape) == 2 and 1 in shape:
+            return max(shape)
+        return None
+
+    def get(self, name: str, start: int | None = None, stop: int | None = None):
+        ds, fld = self._dataset(name)
+        if start is not None:  # samples start … stop − 1 of a vector (length() is not None)
+            if fld is not None:
+                return np.asarray(ds[start:stop][fld])
+            if ds.ndim == 1:
+                value = ds[start:stop]
+            else:
+                value = ds[0, start:stop] if ds.shape[0] == 1 else ds[start:stop, 0]
+            value = np.asarray(value)
+            return value.astype(str) if value.dtype.kind == "S" else value
+        if fld is not None:
+            return np.asarray(ds[fld])
+        obj = ds
         value = obj[()]
         if self.matlab:
             value = np.asarray(value).T
@@ -279,10 +306,11 @@ def _columns_of(path, arrays: dict) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def _tdms(path: Path, group: str | None):
+def _tdms(path: Path, group: str | None, stream: bool = False):
     from nptdms import TdmsFile
 
-    tdms = TdmsFile.read(str(path))
+    # stream: the file's index only; each read takes the samples it asks for (TdmsFile.open)
+    tdms = TdmsFile.open(str(path)) if stream else TdmsFile.read(str(path))
 
     class _Tdms:
         def names(self):
@@ -304,14 +332,28 @@ def _tdms(path: Path, group: str | None):
                 raise InputError(f"{path}: channel '{name}' is in several groups; write it as 'group/{name}'")
             raise _not_found(path, name, self.names())
 
-        def get(self, name: str):
+        def length(self, name: str):
+            return len(self._channel(name[:-5] if name.endswith("@time") else name))
+
+        def get(self, name: str, start: int | None = None, stop: int | None = None):
             if name.endswith("@time"):
                 ch = self._channel(name[:-5])
+                if start is not None and "wf_increment" in ch.properties:
+                    # the waveform's time track (nptdms time_track()), for these samples alone
+                    step = float(ch.properties["wf_increment"])
+                    offset = float(ch.properties.get("wf_start_offset", 0.0))
+                    return offset + step * np.arange(start, min(stop, len(ch)), dtype=float)
                 try:
-                    return ch.time_track()
+                    t = ch.time_track()
                 except (KeyError, ValueError) as exc:
                     raise InputError(f"{path}: channel '{name[:-5]}' has no waveform timing ({exc})") from None
-            return np.asarray(self._channel(name)[:])
+                return t if start is None else t[start:stop]
+            ch = self._channel(name)
+            return np.asarray(ch[:] if start is None else ch[start:stop])
+
+        def close(self):
+            if stream:
+                tdms.close()
 
         def table(self):
             groups = [tdms[group]] if group else tdms.groups()
@@ -332,17 +374,32 @@ def _mdf(path: Path):
             return sorted(n for n in mdf.channels_db if not n.startswith("$"))
 
         def _signal(self, name: str):
+            self._signal_check(name)
+            return mdf.get(name)
+
+        def length(self, name: str):
+            base = name[:-5] if name.endswith("@time") else name
+            self._signal_check(base)
+            group = mdf.channels_db[base][0][0]
+            return int(mdf.groups[group].channel_group.cycles_nr)
+
+        def _signal_check(self, name: str):
             if name not in mdf.channels_db:
                 raise _not_found(path, name, self.names())
             if len(mdf.channels_db[name]) > 1:
                 raise InputError(f"{path}: channel '{name}' is in several groups; rename it in the "
                                  f"recorder or export one group")
-            return mdf.get(name)
 
-        def get(self, name: str):
+        def get(self, name: str, start: int | None = None, stop: int | None = None):
+            base = name[:-5] if name.endswith("@time") else name
+            if start is None:
+                sig = self._signal(base)
+            else:  # those records alone (asammdf reads them from the file)
+                self._signal_check(base)
+                sig = mdf.get(base, record_offset=start, record_count=stop - start)
             if name.endswith("@time"):
-                return np.asarray(self._signal(name[:-5]).timestamps, dtype=float)
-            return np.asarray(self._signal(name).samples)
+                return np.asarray(sig.timestamps, dtype=float)
+            return np.asarray(sig.samples)
 
         def table(self):
             frame = mdf.to_dataframe(time_from_zero=False)
@@ -355,8 +412,9 @@ def _mdf(path: Path):
     return _Mdf()
 
 
-def open_source(path, cmap=None):
-    """Open ``path`` as a source of named channels (see the module doc)."""
+def open_source(path, cmap=None, stream: bool = False):
+    """Open ``path`` as a source of named channels (see the module doc); ``stream``: a TDMS file
+    is opened for reads of sample ranges (its index only is read now)."""
     path = Path(path)
     fmt = format_of(path, cmap)
     if fmt is None:
@@ -379,7 +437,7 @@ def open_source(path, cmap=None):
             frame = pd.read_excel(path, sheet_name=options.get("sheet", 0), header=header, engine="openpyxl")
             return _Columns(path, frame)
         if fmt == "tdms":
-            return _tdms(path, options.get("group"))
+            return _tdms(path, options.get("group"), stream)
         if fmt == "mdf":
             return _mdf(path)
         if fmt == "hdf5":

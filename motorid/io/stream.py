@@ -16,9 +16,12 @@ The same happens on any cell the block checks refuse (a text in a number column,
 a time that does not increase, an unknown protocol, …): the whole-file reader then
 names the file, line and column in its usual one-line :class:`~motorid.errors.InputError`,
 so a bad file gives exactly the message it gave before, and no partial output.
-Files the streaming readers do not take (other formats, a channel map, a decimal
-comma, a UTF-16 text, comment lines above the header) are read whole, file by file,
-and handed on run by run too.
+HDF5, MATLAB v7.3, TDMS and MDF4 files with a channel map are read in blocks of
+:data:`FOREIGN_BLOCK_ROWS` samples (h5py slices, npTDMS ``TdmsFile.open``, asammdf record
+ranges) through ``ChannelMap.apply(..., rows=…)`` and then go the CSV blocks' way.
+Files the streaming readers do not take (xlsx, MATLAB v5, text with a channel map, a
+decimal comma, a UTF-16 text, comment lines above the header) are read whole, file by
+file, and handed on run by run too.
 
 A run id seen in an earlier file is keyed ``<file name>:<run_id>`` (the earlier
 one keeps its bare id; :func:`~motorid.io.logs.read_logs` prefixes both).  Extra
@@ -45,6 +48,10 @@ from motorid.units import FORMAT_COLUMNS, SI_COLUMNS
 BLOCK_BYTES = 1 << 20
 #: rows of a Parquet batch
 PARQUET_BATCH_ROWS = 1 << 16
+#: samples of a block read from an HDF5, MATLAB v7.3, TDMS or MDF4 file through its channel map
+FOREIGN_BLOCK_ROWS = 1 << 16
+#: the formats whose libraries read sample ranges (h5py slices, npTDMS TdmsFile.open, asammdf records)
+RANGE_FORMATS = ("hdf5", "mat", "tdms", "mdf")
 
 
 class StreamFallback(Exception):
@@ -208,6 +215,63 @@ def _parquet_blocks(path: Path, plan):
             yield out, int(size * done / total)
     except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError, OSError) as exc:
         raise StreamFallback(f"{path}: {str(exc).splitlines()[0]}") from None
+
+
+def _foreign_plan(path: Path, channels):
+    """(fields, found, blocks) where ``path`` (HDF5, MATLAB v7.3, TDMS, MDF4) is read through its
+    channel map in blocks of samples, else None (read it whole: no map, a table map, a format or a
+    file whose channels are not vectors of one length; the whole-file reader then says what is wrong)."""
+    from motorid.io import formats
+    from motorid.io.channel_map import ChannelMap, load_channel_map
+
+    cmap = channels if channels is not None else formats.find_channel_map(path)
+    if cmap is None:
+        return None
+    cmap = cmap if isinstance(cmap, ChannelMap) else load_channel_map(cmap)
+    if not cmap.is_log or cmap.grid_axes or formats.format_of(path, cmap) not in RANGE_FORMATS:
+        return None
+    try:
+        source = formats.open_source(path, cmap, stream=True)
+    except InputError:
+        return None
+    try:
+        names = [ch.name for ch in cmap.channels.values()] + list(cmap.extra.values())
+        sizes = {source.length(name) for name in names} if hasattr(source, "length") else {None}
+    except (InputError, KeyError, ValueError, TypeError):
+        sizes = {None}
+    if len(sizes) != 1 or None in sizes or not next(iter(sizes)):
+        if hasattr(source, "close"):
+            source.close()
+        return None
+    n = next(iter(sizes))
+    logs = _logs()
+    label = str(path)
+    first = cmap.apply(source, label, rows=(0, min(n, FOREIGN_BLOCK_ROWS)))
+    fields = [str(c) for c in first.columns]
+    found, _extras = logs._map_columns(path, fields)  # a missing column: the usual message
+    text_cols = {found[k][0] for k in ("run_id", "protocol")}
+    use = sorted({j for j, _ in found.values()})
+    size = path.stat().st_size
+
+    def blocks():
+        frame, start = first, 0
+        try:
+            while True:
+                out = {}
+                for j in use:
+                    col = frame[fields[j]]
+                    out[j] = (col.astype(str).str.strip().to_numpy(dtype=object) if j in text_cols
+                              else col.to_numpy(dtype=float))
+                start += len(frame)
+                yield out, int(size * start / n)
+                if start >= n:
+                    return
+                frame = cmap.apply(source, label, rows=(start, min(n, start + FOREIGN_BLOCK_ROWS)))
+        finally:
+            if hasattr(source, "close"):
+                source.close()
+
+    return fields, found, blocks()
 
 
 # --------------------------------------------------------------------------- one block → SI
@@ -378,8 +442,8 @@ def _file_runs(path: Path, spec, channels, advance) -> Iterator:
 
     size = path.stat().st_size
     fmt = formats.format_of(path)
-    streamed = None
-    if channels is None and formats.find_channel_map(path) is None:
+    streamed = _foreign_plan(path, channels) if fmt in RANGE_FORMATS else None
+    if streamed is None and channels is None and formats.find_channel_map(path) is None:
         if fmt == "csv" and not formats.needs_foreign_reader(path):
             plan = _csv_plan(path)
             if plan is not None:

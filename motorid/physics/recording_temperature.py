@@ -112,6 +112,14 @@ class RecordingTemperature(Mechanism):
         reference = str(labels[order[0]])
         return cls(sorted(str(v) for v in labels if str(v) != reference), reference).bound_to(table)
 
+    @staticmethod
+    def too_small(table) -> list:
+        """The named recordings of ``table`` with fewer than :data:`MIN_POINTS` points: given no
+        viscosity of their own (taken at the assumed temperature)."""
+        rec = table.recordings()
+        labels, counts = np.unique(rec[rec != ""], return_counts=True)
+        return [str(v) for v, c in zip(labels, counts) if c < MIN_POINTS]
+
     def bound_to(self, table):
         """The same mechanism (what a fit saw included), its recordings looked up at the points of
         ``table`` (None: no points)."""
