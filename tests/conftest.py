@@ -14,6 +14,23 @@ DEMO_TRUTH = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0,
               "KL0": 5e-14, "KL_a1": 0.15, "KL_b1": 0.08, "KAB": 2e-14}
 
 
+def map_motor_toml(temp_C: float) -> str:
+    """The demo motor (9 pistons, 80 cm³/rev, ISO VG 46) with an assumed oil temperature, for loss-map
+    tables that hold none."""
+    return f"""
+[motor]
+name = "map-9"
+pistons = 9
+displacement_cm3 = 80.0
+[oil]
+name = "ISO VG 46"
+nu40_cSt = 46.0
+nu100_cSt = 6.8
+density15_kg_m3 = 875.0
+temp_C = {temp_C}
+"""
+
+
 @lru_cache(maxsize=16)
 def simulated(pistons: int = 9, displacement_cm3: float = 80.0, seed: int = 1,
               protocols: tuple = ("constant_speed", "constant_pressure", "startability"),

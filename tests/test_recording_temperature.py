@@ -10,23 +10,11 @@ import math
 import numpy as np
 import pytest
 
-from conftest import REPO
+from conftest import DEMO_TRUTH, REPO, map_motor_toml
 
-TRUTH = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.15,
-         "KL_b1": 0.08, "KAB": 2e-14}
+TRUTH = DEMO_TRUTH
 NOISE = {"torque_Nm": 0.3, "q_a_lpm": 0.05, "q_b_lpm": 0.05, "q_case_lpm": 0.02}
-MOTOR = """
-[motor]
-name = "map-9"
-pistons = 9
-displacement_cm3 = 80.0
-[oil]
-name = "ISO VG 46"
-nu40_cSt = 46.0
-nu100_cSt = 6.8
-density15_kg_m3 = 875.0
-temp_C = 45.0
-"""
+MOTOR = map_motor_toml(45.0)
 #: three recordings (days) of one map, each over its own part of the grid, at oil temperatures the
 #: table does not hold (the spec assumes 45 °C)
 DAYS = (("day1", 45.0, [100, 500, 1000, 2000, 3000], [20, 80, 160, 240, 320], 4),

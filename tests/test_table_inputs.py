@@ -8,22 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from conftest import DEMO_TRUTH, map_motor_toml
 from motorid.errors import InputError
 
-MOTOR = """
-[motor]
-name = "map-9"
-pistons = 9
-displacement_cm3 = 80.0
-[oil]
-name = "ISO VG 46"
-nu40_cSt = 46.0
-nu100_cSt = 6.8
-density15_kg_m3 = 875.0
-temp_C = 50.0
-"""
-TRUTH = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.15,
-         "KL_b1": 0.08, "KAB": 2e-14}
+MOTOR = map_motor_toml(50.0)
+TRUTH = DEMO_TRUTH
 
 
 @pytest.fixture

@@ -93,7 +93,7 @@ def point_channels(params: dict, spec, samples, displacement=None, mechanisms: S
 def bind_mechanisms(mechanisms: Sequence, table) -> tuple:
     """``mechanisms`` with those that belong to a table's points (``bound_to``, e.g. an oil
     temperature per recording) bound to the points of ``table``."""
-    return tuple(m.bound_to(table) if hasattr(m, "bound_to") else m for m in mechanisms)
+    return tuple(m.bound_to(table) for m in mechanisms)
 
 
 # ----------------------------------------------------------------------------- what a table identifies
@@ -336,10 +336,9 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     n = len(table)
     train = np.ones(n, bool) if train is None else np.asarray(train, bool)
     # a mechanism of the table's own points, set for the points fitted (e.g. the recordings they hold)
-    mechanisms = tuple(m.for_training(table, train) if hasattr(m, "for_training") else m for m in mechanisms)
+    mechanisms = tuple(m.for_training(table, train) for m in mechanisms)
     for mech in mechanisms:
-        if hasattr(mech, "table_reasons"):
-            reasons.update({k: v for k, v in mech.table_reasons(table, train).items() if k not in reasons})
+        reasons.update({k: v for k, v in mech.table_reasons(table, train).items() if k not in reasons})
     start = _linear_start(spec, table.subset(train), names, mechanisms)
     if log_fit is not None:
         start.update({k: v for k, v in log_fit.params_all.items() if v is not None and k in names})

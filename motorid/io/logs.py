@@ -466,6 +466,16 @@ def _log_paths(paths) -> list:
     return result
 
 
+def refuse_repeats(paths, what: str) -> None:
+    """One line naming the first file given twice (the same file by any path) among ``paths``."""
+    resolved: dict = {}
+    for p in map(Path, paths):
+        key = p.resolve()
+        if key in resolved:
+            raise InputError(f"{p}: {what} given twice (also as {resolved[key]})")
+        resolved[key] = p
+
+
 def read_logs(paths, spec=None, channels=None) -> pd.DataFrame:
     """Read a campaign: one or many logs (files, or directories of ``*.csv``/``*.csv.gz``).
 
@@ -474,12 +484,7 @@ def read_logs(paths, spec=None, channels=None) -> pd.DataFrame:
     (``<file>`` is the file name, or the whole path where names repeat).
     """
     files = _log_paths(paths)
-    resolved: dict = {}
-    for p in files:
-        key = p.resolve()
-        if key in resolved:
-            raise InputError(f"{p}: log given twice (also as {resolved[key]})")
-        resolved[key] = p
+    refuse_repeats(files, "log")
     frames = [read_log(p, spec, channels) for p in files]
     names = [p.name for p in files]
     labels = names if len(set(names)) == len(names) else [str(p) for p in files]

@@ -473,13 +473,11 @@ def read_tables(paths, spec=None, require_outputs: bool = True, channels=None) -
     :func:`read_mapped_table`."""
     from motorid.io.formats import needs_foreign_reader
 
+    from motorid.io.logs import refuse_repeats
+
+    refuse_repeats(paths, "table")
     out = []
-    seen: dict = {}
     for p in paths:
-        key = Path(p).resolve()
-        if key in seen:
-            raise InputError(f"{p}: table given twice (also as {seen[key]})")
-        seen[key] = p
         if channels is not None or needs_foreign_reader(p):
             out.append(read_mapped_table(p, spec, channels, require_outputs))
         else:

@@ -111,6 +111,19 @@ class Mechanism:
         sees them (e.g. an oil temperature the table did not record); samples are points × angles."""
         return samples
 
+    def bound_to(self, table) -> "Mechanism":
+        """This mechanism for the points of ``table`` (a mechanism of a table's own points, such as
+        an oil temperature per recording, looks its recordings up there)."""
+        return self
+
+    def for_training(self, table, train) -> "Mechanism":
+        """This mechanism for a fit on ``table``'s points where ``train`` holds."""
+        return self
+
+    def table_reasons(self, table, train) -> dict:
+        """parameter → why a fit on ``table``'s points where ``train`` holds cannot give it."""
+        return {}
+
     def static_limit(self, params: dict, spec, events: Samples, limit):
         """Change the static friction limit T_break at breakaway events [N·m]."""
         return limit

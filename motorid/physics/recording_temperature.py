@@ -89,8 +89,8 @@ class RecordingTemperature(Mechanism):
         return f"recording_temperature.{label}"
 
     def _copy(self, **changes):
-        state = dict(labels=self.labels, reference_recording=self.reference_recording, index=self.index, fitted=self.fitted,
-                     implied=self.implied)
+        state = dict(labels=self.labels, reference_recording=self.reference_recording, index=self.index,
+                     fitted=self.fitted, implied=self.implied)
         state.update(changes)
         return type(self)(**state)
 
@@ -122,9 +122,7 @@ class RecordingTemperature(Mechanism):
 
     def bound_to(self, table):
         """The same mechanism (what a fit saw included), its recordings looked up at the points of
-        ``table`` (None: no points)."""
-        if table is None:
-            return self._copy(index=None)
+        ``table``."""
         rec = table.recordings()
         pos = {self.reference_recording: 0, **{v: i + 1 for i, v in enumerate(self.labels)}}
         unknown = len(self.labels) + 1
@@ -144,6 +142,10 @@ class RecordingTemperature(Mechanism):
     def _seen(self, label: str) -> bool:
         return self.fitted is None or label in self.fitted
 
+    def _free(self) -> list:
+        """The recordings whose s is a fitted parameter: seen, and not the one carrying −Σ."""
+        return [v for v in self.labels if self._seen(v) and v != self.implied]
+
     def table_reasons(self, table, train) -> dict:
         """parameter → why a fit on ``table``'s points where ``train`` holds does not fit it (call on
         :meth:`for_training`'s mechanism)."""
@@ -161,8 +163,7 @@ class RecordingTemperature(Mechanism):
         if np.shape(samples.viscosity)[0] != self.index.size:
             raise ValueError(f"{self.id}: bound to {self.index.size} points, given {np.shape(samples.viscosity)[0]}")
         zero = jnp.zeros((), dtype=jnp.float64)
-        free = {v: jnp.asarray(params[self.key(v)], dtype=jnp.float64) for v in self.labels
-                if self._seen(v) and v != self.implied}
+        free = {v: jnp.asarray(params[self.key(v)], dtype=jnp.float64) for v in self._free()}
         implied = -sum(free.values(), zero)
         names = (self.reference_recording,) + self.labels
         shift = jnp.stack([implied if v == self.implied and self._seen(v) else free.get(v, zero) for v in names]
@@ -171,19 +172,15 @@ class RecordingTemperature(Mechanism):
         factor = factor.reshape(factor.shape + (1,) * (np.ndim(samples.viscosity) - 1))
         return samples._replace(viscosity=samples.viscosity * factor)
 
-    def initial(self) -> dict:
-        return {k: 0.0 for k in self.parameters}
-
     def neutral(self) -> dict:
-        return {k: 0.0 for k in self.parameters}
+        return self.initial()  # every s_r at 0: the assumed temperature in every recording
 
     def shifts(self, values: dict, covariance=None, names=None) -> dict:
         """recording → (s_r, its std or None) [-] as the fit used them (:meth:`for_training`): the
         implied recording's s = −Σ of the other seen ones, an unseen one 0; std from ``covariance``
         over ``names`` (the fit's free parameters) where given."""
-        every = (self.reference_recording,) + self.labels
-        free = [v for v in self.labels if self._seen(v) and v != self.implied]
-        out = {v: (0.0, None) for v in every}
+        free = self._free()
+        out = {v: (0.0, None) for v in (self.reference_recording,) + self.labels}
         for v in free:
             out[v] = (float(values[self.key(v)]), None)
         cov = None if covariance is None or names is None else np.asarray(covariance, float)
