@@ -221,9 +221,10 @@ def _fit_tables(log_paths, tables, spec, harmonics, mechanisms, channels, motor_
                          "reported)")
     tf = identify_tables(log_paths, tables, spec, mechanisms=mechanisms, harmonics=harmonics, channels=channels)
     comparison = compare(tf.table, spec, mechanisms=mechanisms) if len(tf.table) >= 10 else None
-    inputs = {"logs": [str(p) for p in log_paths], "tables": [str(p) for p in tables], "motor": motor_input}
+    inputs = {"logs": [str(Path(p).resolve()) for p in log_paths], "tables": [str(Path(p).resolve()) for p in tables],
+              "motor": motor_input}
     if channels is not None:
-        inputs["channels"] = str(getattr(channels, "path", channels))
+        inputs["channels"] = str(Path(getattr(channels, "path", channels)).resolve())
     return FitResult(table_result_document(tf, spec, inputs, comparison), spec, tf)
 
 

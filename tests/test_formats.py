@@ -406,3 +406,125 @@ def test_mbari_recording_reads_through_its_map_with_physical_signs():
     h = read_logs(MBARI / "2022.01.28T16.46.31_new.exp.gz", spec)
     n = len(h)
     np.testing.assert_allclose(g["p_b_Pa"].to_numpy()[:n], h["p_b_Pa"].to_numpy(), atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- a new user's bench files
+# (found by trying motorid as a new user would, 2026-11-26)
+
+def test_a_plain_csv_log_with_its_own_names_is_a_log_under_its_map(campaign, tmp_path):
+    """A ','-separated log whose columns a channel map names (its time column 't', which reads as no
+    time column) was taken for an operating-point table and refused ('missing speed_rpm'), both under
+    --channels and with the map beside it; a native table given with the logs' map stays a table."""
+    from motorid.io.tables import split_logs_and_tables
+
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    path = tmp_path / "bench.csv"
+    pd.DataFrame(raw).to_csv(path, index=False, float_format="%.17g")
+    cmap = tmp_path / "bench7.toml"
+    cmap.write_text(map_text())
+    table = tmp_path / "points.csv"
+    pd.DataFrame({"speed_rpm": [100.0, 200.0, 300.0], "p_a_bar": [100.0] * 3, "p_b_bar": [0.0] * 3,
+                  "torque_Nm": [10.0, 11.0, 12.0]}).to_csv(table, index=False)
+    assert split_logs_and_tables([path, table], cmap) == ([path], [table])
+    assert_same_frame(read_logs(path, spec, channels=cmap), read_logs(csv, spec))
+    cmap.rename(tmp_path / "bench.channels.toml")  # beside the file
+    assert split_logs_and_tables([path], None) == ([path], [])
+    assert_same_frame(read_logs(path, spec), read_logs(csv, spec))
+
+
+@pytest.mark.parametrize("unit,factor", [("lbf*in", 0.1129848290276167), ("lbf·ft", 1.3558179483314004),
+                                         ("in.lbf", 0.1129848290276167), ("ft-lb", 1.3558179483314004)])
+def test_torque_in_the_units_makers_write_reads(unit, factor, campaign, tmp_path):
+    """'lbf*in' normalizes to 'lbfin' (the separator dropped): it was refused as an unknown unit."""
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    raw = dict(raw, T_pump=raw["T_pump"] / factor)
+    path = tmp_path / "bench.parquet"
+    pd.DataFrame(raw).to_parquet(path)
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text().replace('unit = "N*m", sign = -1', f'unit = "{unit}", sign = -1'))
+    np.testing.assert_allclose(read_logs(path, spec, channels=cmap)["torque_Nm"], read_logs(csv, spec)["torque_Nm"],
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_a_psia_channel_is_absolute_without_saying_so_and_a_contradiction_is_refused(campaign, tmp_path):
+    """unit = "psia" with no 'absolute' key was read as gauge (1.013 bar high: K_L0 64 σ off)."""
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    path = tmp_path / "bench.parquet"
+    pd.DataFrame(raw).to_parquet(path)
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text().replace('unit = "psi", absolute = true', 'unit = "psia"'))
+    np.testing.assert_allclose(read_logs(path, spec, channels=cmap)["p_a_Pa"], read_logs(csv, spec)["p_a_Pa"],
+                               rtol=1e-12, atol=1e-4)
+    cmap.write_text(map_text().replace('unit = "psi", absolute = true', 'unit = "psia", absolute = false'))
+    with pytest.raises(InputError, match=r"map.toml: \[channels\] p_a_bar: unit .psia. is an absolute pressure"):
+        read_logs(path, spec, channels=cmap)
+
+
+def test_a_timestamp_time_channel_reads_as_seconds(campaign, tmp_path):
+    """A datetime64 time track (as NI and MDF loggers write it) was read as raw microsecond counts
+    taken for seconds: time steps of 10 000 s, no warning."""
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    start = np.datetime64("2026-03-01T08:00:00", "us")
+    stamps = start + (raw["t"] * 1e6).round().astype("timedelta64[us]")
+    path = tmp_path / "bench.parquet"
+    pd.DataFrame(dict(raw, t=stamps)).to_parquet(path)
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text())
+    got, ref = read_logs(path, spec, channels=cmap), read_logs(csv, spec)
+    np.testing.assert_allclose(np.diff(got["time_s"]), np.diff(ref["time_s"]), atol=2e-6)
+    cmap.write_text(map_text().replace('time_s = {name = "t", unit = "s"}', 'time_s = {name = "t", unit = "ms"}'))
+    with pytest.raises(InputError, match=r"channel 't' \(time_s\) holds timestamps"):
+        read_logs(path, spec, channels=cmap)
+
+
+def test_a_map_of_a_time_series_that_forgot_time_is_refused(campaign, tmp_path):
+    """With run_id, protocol and shaft angle mapped but no time_s the map was taken for a loss map's,
+    and a time series was fitted as operating points (exit 0)."""
+    from motorid.io.channel_map import load_channel_map
+
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text().replace('time_s = {name = "t", unit = "s"}\n', ""))
+    with pytest.raises(InputError, match=r"maps shaft_angle_deg, which only a time series has, but no time_s"):
+        load_channel_map(cmap)
+
+
+@pytest.mark.parametrize("segments", [1, 4])
+def test_a_tdms_file_cut_short_is_refused_in_one_line(segments, campaign, tmp_path, capsys):
+    """A TDMS file cut inside its last segment (a DAQ stopped mid-write): npTDMS reads it "to the end
+    of the file" with two warning lines, and motorid fitted the part it got (exit 0); now one line."""
+    from nptdms import ChannelObject, TdmsWriter
+
+    _, raw, _ = campaign
+    path = tmp_path / "cut.tdms"
+    n = len(raw["t"])
+    with TdmsWriter(str(path)) as w:
+        for part in np.array_split(np.arange(n), segments):
+            w.write_segment([ChannelObject("Measurement", k, np.asarray(v, float)[part]) for k, v in raw.items()])
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * 0.6)])
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text(prefix="Measurement/"))
+    with pytest.raises(InputError, match=r"cut.tdms: cut short: its last segment holds \d+ of the \d+ samples its header announces"):
+        read_logs(path, load_motor_spec(MOTOR), channels=cmap)
+    assert "nptdms" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("edit,words", [
+    (('unit = "rad/s", sign = -1', 'unit = "rpm", sign = -1'), "as for a speed in rad/s read as rpm"),
+    (('time_s = {name = "t", unit = "s"}', 'time_s = {name = "t", unit = "ms"}'), "as for a time in s read as ms"),
+])
+def test_a_unit_mistake_the_shaft_angle_contradicts_is_refused(edit, words, campaign, tmp_path, capsys):
+    """A speed logged in rad/s mapped as rpm (or a time in s mapped as ms) is a valid unit, and was
+    fitted silently (K_v 528 instead of 5000): the shaft angle's own rate says otherwise."""
+    _, raw, _ = campaign
+    path = tmp_path / "bench.parquet"
+    pd.DataFrame(raw).to_parquet(path)
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text().replace(*edit))
+    err = _cli_fails(["fit", str(path), "--channels", str(cmap), "--motor", str(MOTOR), "--out",
+                      str(tmp_path / "out")], capsys)
+    assert "the shaft angle advances at" in err and words in err

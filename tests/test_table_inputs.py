@@ -137,3 +137,49 @@ def test_a_table_given_twice_is_refused(made):
     df.to_csv(d / "map.csv", index=False)
     with pytest.raises(InputError, match="table given twice"):
         read_tables([d / "map.csv", d / ".." / d.name / "map.csv"], spec)
+
+
+def test_report_re_reads_a_mapped_table_from_any_folder(made, monkeypatch, capsys):
+    """`motorid report DIR` of a fit read through --channels refused ('read it with a channel map'), and
+    a fit given a relative path could not be reported from another folder: result.json now keeps
+    the tables' absolute paths and the map they were read through."""
+    from motorid.cli import main
+
+    d, spec, df = made
+    df.rename(columns={"speed_rpm": "n", "p_a_bar": "pA", "p_b_bar": "pB", "torque_Nm": "M"})[
+        ["n", "pA", "pB", "M"]].to_csv(d / "maker.csv", index=False)
+    (d / "bench.toml").write_text('[channels]\nspeed_rpm = {name = "n", unit = "rpm"}\n'
+                                  'p_a_bar = {name = "pA", unit = "bar"}\np_b_bar = {name = "pB", unit = "bar"}\n'
+                                  'torque_Nm = {name = "M", unit = "N*m"}\n')
+    monkeypatch.chdir(d)
+    assert main(["fit", "maker.csv", "--channels", "bench.toml", "--motor", "motor.toml", "--out", "fit",
+                 "--quiet"]) == 0
+    elsewhere = d / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    capsys.readouterr()
+    assert main(["report", str(d / "fit")]) == 0, capsys.readouterr().err
+    assert (d / "fit" / "report.html").stat().st_size > 10_000
+
+
+def test_predict_says_where_it_cannot_or_where_it_extrapolates(made, monkeypatch):
+    """At rest the torque is not predicted (it lies within static friction: it had a zero-width band);
+    where power flows in at both the shaft and the ports no efficiency is given (it printed −2.2);
+    a point outside the fitted |ΔP| is noted as extrapolated."""
+    from motorid.cli import main
+    from motorid.identify.predict import predict_points
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    df.to_csv(d / "map.csv", index=False)
+    monkeypatch.chdir(d)
+    assert main(["fit", "map.csv", "--motor", "motor.toml", "--out", "fit", "--quiet"]) == 0
+    pd.DataFrame({"point_id": ["rest", "idle", "inside", "high"], "speed_rpm": [0.0, 2000.0, 1000.0, 1000.0],
+                  "p_a_bar": [150.0, 1.0, 150.0, 600.0], "p_b_bar": [0.0] * 4}).to_csv(d / "pts.csv", index=False)
+    pred = predict_points(d / "fit", read_tables([d / "pts.csv"], spec, require_outputs=False)).set_index("point_id")
+    assert np.isnan(pred.loc["rest", "torque_Nm"]) and "at rest" in pred.loc["rest", "note"]
+    assert np.isfinite(pred.loc["rest", "q_case_lpm"])
+    assert pred.loc["idle", "torque_Nm"] < 0  # friction above the ideal torque at 1 bar
+    assert np.isnan(pred.loc["idle", "overall_efficiency"]) and "not that of a motor or a pump" in pred.loc["idle", "note"]
+    assert pred.loc["inside", "note"] == "" and 0 < pred.loc["inside", "overall_efficiency"] < 1
+    assert "extrapolated: |ΔP| 600 bar outside the fitted 50-250 bar" in pred.loc["high", "note"]

@@ -31,7 +31,7 @@ def run_table_fit(args, logs, tables, spec) -> int:
     check_output(out, args.force)
     tf = identify_tables(logs, tables, spec, harmonics=args.harmonics, channels=getattr(args, "channels", None))
     comparison = compare(tf.table, spec) if len(tf.table) >= 10 else None
-    inputs = {"logs": [str(p) for p in logs], "tables": [str(p) for p in tables], "motor": str(args.motor)}
+    inputs = _inputs(logs, tables, args)
     doc = table_result_document(tf, spec, inputs, comparison)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / RESULT_FILE)
@@ -87,7 +87,7 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
     dg = diagnose_table(table, spec, min_evidence=args.min_evidence, dataset=dataset, log_fit=log_fit,
                         progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
     doc = diagnosis_table_document(dg, spec)
-    doc["inputs"] = {"logs": [str(p) for p in logs], "tables": [str(p) for p in tables], "motor": str(args.motor)}
+    doc["inputs"] = _inputs(logs, tables, args)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / "diagnosis.json")
     if not doc["mismatch"]:
@@ -102,3 +102,14 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
         print(format_comparison(doc["comparison"]))
     print(f"wrote {out / 'diagnosis.json'}")
     return 0
+
+
+def _inputs(logs, tables, args) -> dict:
+    """result.json's ``inputs``: absolute paths (``motorid report`` re-reads the tables from any
+    folder) and the channel map the files were read through, where one was given."""
+    out = {"logs": [str(Path(p).resolve()) for p in logs], "tables": [str(Path(p).resolve()) for p in tables],
+           "motor": str(args.motor)}
+    channels = getattr(args, "channels", None)
+    if channels is not None:
+        out["channels"] = str(Path(getattr(channels, "path", channels)).resolve())
+    return out

@@ -75,6 +75,19 @@ class Location:
         return out
 
 
+def trend_words(means, variable: str) -> str | None:
+    """How group means ordered along ``variable`` run, in words ("rising with …", "falling with …",
+    "not monotone in …"); None for fewer than three groups."""
+    if len(means) < 3:
+        return None
+    d = np.diff(means)
+    if np.all(d >= 0):
+        return f"rising with {variable}"
+    if np.all(d <= 0):
+        return f"falling with {variable}"
+    return f"not monotone in {variable}"
+
+
 def _fmt(value, channel) -> str:
     unit, f = UNIT[channel]
     return f"{value * f:.3g} {unit}"
@@ -92,14 +105,29 @@ def _lag1(z: np.ndarray) -> float:
     return float(np.clip(np.sum(a * b) / den, 0.0, 0.95)) if den > 0 else 0.0
 
 
-def _run_table(z, run_of, n_runs, shared_var=None):
+class _RunIndex:
+    """Each run's samples, in time order: ``of(r)`` → their indices (a stable sort of the run
+    numbers, made once; a run's samples are then a slice, not a mask over every sample)."""
+
+    def __init__(self, run_of, n_runs: int):
+        self.order = np.argsort(run_of, kind="stable")
+        self.bounds = np.searchsorted(np.asarray(run_of)[self.order], np.arange(n_runs + 1))
+
+    def of(self, r: int) -> np.ndarray:
+        return self.order[self.bounds[r]:self.bounds[r + 1]]
+
+
+def _run_table(z, index, n_runs, shared_var=None):
     """Per run: mean normalized residual and its standard error (AR(1) corrected;
     plus ``shared_var`` per run, an error common to the run's samples in units of
-    its noise level squared, such as that of its smoothed viscosity)."""
+    its noise level squared, such as that of its smoothed viscosity).  ``index``: a
+    :class:`_RunIndex`, or the run of each sample."""
+    if not isinstance(index, _RunIndex):
+        index = _RunIndex(np.asarray(index, dtype=int), n_runs)
     mean = np.full(n_runs, np.nan)
     se = np.full(n_runs, np.nan)
     for r in range(n_runs):
-        v = z[run_of == r]
+        v = z[index.of(r)]
         v = v[np.isfinite(v)]
         if v.size < 5:
             continue
@@ -192,6 +220,7 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
     runs = dataset.runs
     kmax = max_order or 2 * spec.pistons + 2
     found: list[Structure] = []
+    index = _RunIndex(run_of, n_runs)
 
     per_run = {
         "speed": _quantile_groups(runs["speed_median_rad_s"].abs().to_numpy(), 6, fmt=_rpm),
@@ -207,8 +236,9 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
     for name, arr, fmt in (("pressure to case", np.asarray(s.p_case), _bar),
                            ("viscosity", np.asarray(s.viscosity), _mpas)):
         med = np.full(n_runs, np.nan)
-        for r in np.unique(run_of):
-            med[r] = np.median(arr[run_of == r])
+        for r in range(n_runs):
+            if index.bounds[r + 1] > index.bounds[r]:
+                med[r] = np.median(arr[index.of(r)])
         per_run[name] = _quantile_groups(med, 4, fmt=fmt)
 
     for c in RUNNING_CHANNELS:
@@ -221,8 +251,9 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
         mean_res = np.full(n_runs, np.nan)
         noise_run = np.full(n_runs, np.nan)
         for r in range(n_runs):
-            sel = (run_of == r) & ok
-            if sel.sum():
+            sel = index.of(r)
+            sel = sel[ok[sel]]
+            if sel.size:
                 mean_res[r] = res[sel].mean()
                 noise_run[r] = np.median(sig[sel])
         # the smoothed viscosity's error is common to a run: it moves the run's mean residual
@@ -231,7 +262,7 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
         if visc is not None and len(visc) == n_runs:
             with np.errstate(invalid="ignore", divide="ignore"):
                 shared = np.asarray(visc) / noise_run**2
-        mean_z, se_z = _run_table(z, run_of, n_runs, shared)
+        mean_z, se_z = _run_table(z, index, n_runs, shared)
         zrun = mean_z / se_z
         have = np.isfinite(zrun)
         if have.sum() >= 2:
@@ -252,7 +283,7 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
                     effect=worst[1], effect_sigma=abs(worst[1]) / worst[3] if worst[3] > 0 else np.inf,
                     where=_words_between(c, var, worst, runs, have, labels), groups=glist))
         # within runs: shaft orders and time
-        found += _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec, per_run["speed"])
+        found += _within_runs(c, z, res, sig, ok, s, index, n_runs, kmax, spec, per_run["speed"])
 
     if "breakaway" in ls.residuals and np.sum(ls.inliers["breakaway"]) >= 6:
         found += _breakaway_structures(ls, dataset, spec)
@@ -307,18 +338,17 @@ def _harmonic_fits(theta, z, kmax: int):
     y = z - z.mean()
     cc, ss, cs = np.sum(c * c, axis=0), np.sum(s * s, axis=0), np.sum(c * s, axis=0)
     bc, bs = y @ c, y @ s
-    out = []
-    for k in range(kmax):
-        det = cc[k] * ss[k] - cs[k] ** 2
-        if det > 1e-12 * max(cc[k] * ss[k], 1e-300):
-            beta = np.array([ss[k] * bc[k] - cs[k] * bs[k], cc[k] * bs[k] - cs[k] * bc[k]]) / det
-        else:  # the angles do not tell cos from sin at this order
-            beta = np.linalg.lstsq(np.column_stack([c[:, k], s[:, k]]), y, rcond=None)[0]
-        out.append((k + 1, beta, float(beta[0] * bc[k] + beta[1] * bs[k])))
-    return out
+    det = cc * ss - cs**2
+    good = det > 1e-12 * np.maximum(cc * ss, 1e-300)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        beta = np.stack([ss * bc - cs * bs, cc * bs - cs * bc], axis=1) / det[:, None]
+    for k in np.flatnonzero(~good):  # the angles do not tell cos from sin at this order
+        beta[k] = np.linalg.lstsq(np.column_stack([c[:, k], s[:, k]]), y, rcond=None)[0]
+    explained = beta[:, 0] * bc + beta[:, 1] * bs
+    return [(k + 1, beta[k], float(explained[k])) for k in range(kmax)]
 
 
-def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec, speed_groups=None) -> list:
+def _within_runs(c, z, res, sig, ok, s, index: _RunIndex, n_runs, kmax, spec, speed_groups=None) -> list:
     theta = np.asarray(s.theta)
     t = np.asarray(s.time)
     speed = np.asarray(s.speed)
@@ -329,10 +359,8 @@ def _within_runs(c, z, res, sig, ok, s, run_of, n_runs, kmax, spec, speed_groups
     zamp_k = [[] for _ in range(kmax + 1)]  # the same over the run's noise level
     run_k = [[] for _ in range(kmax + 1)]
     stat_t, dof_t, trend = 0.0, 0, []
-    order = np.argsort(run_of, kind="stable")  # each run's samples in time order, found once
-    bounds = np.searchsorted(run_of[order], np.arange(n_runs + 1))
     for r in range(n_runs):
-        sel = order[bounds[r]:bounds[r + 1]]
+        sel = index.of(r)
         sel = sel[ok[sel]]
         n = int(sel.size)
         if n < 30:

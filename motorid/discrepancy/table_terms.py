@@ -167,15 +167,34 @@ class _FittedWithTerms:
 
 def unexplained_table_entries(fit, spec) -> list:
     """``unexplained`` entries of a table diagnosis: per channel, the empirical term its residuals
-    support after the final fit (every point), in words and numbers; [] where none holds."""
+    support after the final fit (every point), in words and numbers; where no term holds but the
+    residuals still run along an operating variable beyond the noise
+    (:func:`~motorid.discrepancy.table_structure.table_structures`), that structure in words and
+    numbers, with no formula; [] where neither."""
+    from motorid.discrepancy.table_structure import shape_words, table_structures
+
     table = fit.table
     entries = []
+    located = table_structures(fit)
     for c in CHANNELS:
         r = np.asarray(fit.table_residuals[c], float)
         if not np.isfinite(r).any():
             continue
         sigma = np.asarray(fit.table_sigma[c], float)
         term = search(c, table, r, sigma, np.ones(len(table), bool), spec)
+        mine = [s for s in located if s["channel"] == c]
+        if term is None and mine:
+            big = max(mine, key=lambda s: s["effect_sigma"])
+            shape = shape_words(mine)
+            variables = list(dict.fromkeys(s["variable"] for s in mine))
+            text = (f"the {CHANNEL_WORDS[c]} differs from the model along {', '.join(variables)}: "
+                    f"{big['where']}" + (f"; {shape}" if shape else "")
+                    + "; no catalog mechanism and no term of the empirical library explains it")
+            entries.append({"channel": c, "description": text, "empirical_term": None,
+                            "residual_rms": float(np.sqrt(np.nanmean(r**2))), "variables": variables,
+                            "where": big["where"], "p_value": mine[0]["p_value"], "effect": big["effect"],
+                            "effect_sigma": big["effect_sigma"], "shape": shape,
+                            "structures": [s["where"] for s in mine]})
         if term is None:
             continue
         d = term.as_dict()

@@ -83,6 +83,12 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
     bic = _profile_bic(fit0)
     base_fit = best_fit = fit0
     steps = []
+    if dataset is None:  # a table alone: what its points cannot tell from the physics it mimics
+        for mech in list(cands):
+            why = mech.unseen_in_table(table)
+            if why is not None:
+                cands.remove(mech)
+                steps.append({"id": mech.id, "skipped": why})
     while len(current) < max_mechanisms:
         trials = []
         for mech in cands:
@@ -118,7 +124,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
 
     unexplained = unexplained_table_entries(best_fit, spec)  # on the table's points, logs or not
     model = None
-    if unexplained:  # held out, the empirical term is chosen again on each fold's training points alone
+    if any(u.get("empirical_term") for u in unexplained):  # held out, the empirical term is chosen again on each fold's training points alone
         model = MotoridWithTerms(spec, current, label="motorid" + "".join(" + " + m.id for m in current)
                                  + " + empirical term")
     comparison = compare(table, spec, mechanisms=current, motorid_model=model) if len(table) >= 10 else None

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT
+from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT, trend_words
 
 MIN_EXCESS = 50.0
 EXCESS_FRACTION = 0.1
@@ -122,15 +122,9 @@ def _shape(structures) -> str:
         elif s.variable == "time within run":
             words.append("a drift within runs")
         elif s.groups and s.variable not in ("run", "protocol", "direction"):
-            means = [g[1] for g in s.groups]
-            if len(means) >= 3:
-                d = np.diff(means)
-                if np.all(d >= 0):
-                    words.append(f"rising with {s.variable}")
-                elif np.all(d <= 0):
-                    words.append(f"falling with {s.variable}")
-                else:
-                    words.append(f"not monotone in {s.variable}")
+            trend = trend_words([g[1] for g in s.groups], s.variable)
+            if trend:
+                words.append(trend)
         elif s.variable == "direction" and len(s.groups) == 2:
             a, b = s.groups[0][1], s.groups[1][1]
             words.append("of opposite sign in the two directions" if a * b < 0 else "of one sign in both directions")

@@ -97,6 +97,7 @@ class _Gathered:
     visc: list = field(default_factory=list)
     events: list = field(default_factory=list)
     pending: list = field(default_factory=list)  # (event, columns) of onsets on a speed limit
+    angle_ratios: list = field(default_factory=list)  # (run, shaft-angle rate / logged speed)
 
     def __post_init__(self):
         self.visc_center, self.visc_half = np.zeros(self.n_runs), np.ones(self.n_runs)
@@ -142,6 +143,7 @@ def _add_running(g: _Gathered, r: int, key, pos, cols, row: dict, settings, cell
     row.update(direction=direction, excluded=why)
     if chosen is None:
         return np.arange(pos.size)
+    _angle_against_speed(g, key, cols, chosen)
     steady = np.zeros(pos.size, bool)
     steady[chosen] = True
     acc = running_acceleration(cols["time_s"], cols["speed_rad_s"], cols["theta_rad"], steady,
@@ -163,6 +165,68 @@ def _add_running(g: _Gathered, r: int, key, pos, cols, row: dict, settings, cell
     g.run_of_sample.append(np.full(chosen.size, r))
     g.directions.append(np.full(chosen.size, direction))
     return chosen
+
+
+def _angle_against_speed(g: _Gathered, key, cols, chosen) -> None:
+    """The rate at which the logged shaft angle advances over the logged speed, in a run where the
+    angle is sampled finely enough to follow (median step < π/2) over half a revolution or more:
+    1 where the speed's and the time's units are what the map or the header says (rpm logged as
+    rad/s gives 1/9.55, seconds logged as ms 1000) → ``g.angle_ratios``."""
+    idx = np.asarray(chosen)
+    if idx.size < 20:
+        return
+    t, th, w = cols["time_s"], cols["theta_rad"], cols["speed_rad_s"]
+    # consecutive samples only (a gap where unsteady samples were left out may hide whole turns)
+    a, b = idx[:-1], idx[1:]
+    dt = t[b] - t[a]
+    pair = (b - a == 1) & np.isfinite(dt) & (dt > 0) & np.isfinite(th[a]) & np.isfinite(th[b])
+    if pair.sum() < 20:
+        return
+    a, b, dt = a[pair], b[pair], dt[pair]
+    pair = dt <= 1.5 * np.median(dt)
+    a, b, dt = a[pair], b[pair], dt[pair]
+    step = np.angle(np.exp(1j * (th[b] - th[a])))
+    moving = np.abs(step) > 0
+    speed = float(np.nanmedian(w[idx]))
+    # an angle that follows: the steps it does take well below π/2 (an aliased step would wrap), and
+    # half a revolution turned in all
+    if (abs(speed) < 0.05 or moving.sum() < 10 or np.quantile(np.abs(step[moving]), 0.9) > np.pi / 2
+            or abs(step.sum()) < np.pi):
+        return
+    g.angle_ratios.append((key, float(step.sum() / dt.sum() / speed)))
+
+
+#: |median rate ratio| outside this band: the speed's or the time's unit is not what the log says
+ANGLE_RATIO_BAND = (0.8, 1.25)
+
+
+def _check_angle_rate(g: _Gathered) -> None:
+    """Refuse a campaign whose shaft angle advances at another rate than its speed says, in the median
+    over its runs, by the factor of a unit mistake in a channel map or a header (the fit would be
+    meaningless); note another factor (an encoder on another shaft), and an angle that runs against
+    the speed (the ripple's phase then comes out mirrored)."""
+    if len(g.angle_ratios) < 2:
+        return
+    ratio = float(np.median([r for _, r in g.angle_ratios]))
+    lo, hi = ANGLE_RATIO_BAND
+    if not lo <= abs(ratio) <= hi:
+        hint = ""
+        for factor, words in ((60 / (2 * np.pi), "a speed in rad/s read as rpm"),
+                              (2 * np.pi / 60, "a speed in rpm read as rad/s"), (1e3, "a time in s read as ms"),
+                              (1e-3, "a time in ms read as s"), (180 / np.pi, "an angle in degrees read as rad"),
+                              (np.pi / 180, "an angle in rad read as degrees")):
+            if abs(abs(ratio) / factor - 1) < 0.1:
+                hint = f" (as for {words})"
+        if not hint:  # no unit mistake it matches (a gearbox between encoder and motor?): said, not refused
+            g.notes.append(f"the shaft angle advances at {abs(ratio):.4g}× the rate the logged speed gives, in the "
+                           f"median over {len(g.angle_ratios)} runs: is the encoder on the motor's shaft?")
+            return
+        raise InputError(f"the shaft angle advances at {abs(ratio):.4g}× the rate the logged speed gives, in the "
+                         f"median over {len(g.angle_ratios)} runs{hint}: check the units of speed_rpm, time_s and "
+                         "shaft_angle_deg (header suffixes or channel map)")
+    if ratio < 0:
+        g.notes.append(f"the shaft angle runs against the logged speed in the median over {len(g.angle_ratios)} "
+                       "runs: the encoder counts the other way (the K_L(θ) harmonics' phase comes out mirrored)")
 
 
 def _note_in_step(notes: list, key, time, speed, orders) -> None:
@@ -246,6 +310,7 @@ def _extract_run(g: _Gathered, r: int, key, pos, cols, protocol, file, settings,
 
 def _finish(spec, g: _Gathered, running_samples, cells=None) -> Dataset:
     """The gathered runs → :class:`Dataset` (``running_samples(runs)`` gives its running part)."""
+    _check_angle_rate(g)
     place_limited_onsets(g.events, g.pending)
     for e in g.events:
         g.rows[e["run_index"]]["onset_time_s"] = e["onset"]

@@ -32,6 +32,7 @@ import pandas as pd
 from motorid import _jaxconfig  # noqa: F401
 from motorid import model
 from motorid.errors import InputError
+from motorid.io.tables import STALL_SPEED  # |ω| [rad/s] below which a point is at rest
 from motorid.physics.efficiency import efficiencies, operating_mode
 
 Z95 = 1.959963984540054
@@ -169,7 +170,48 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
                 half_p = Z95 * np.sqrt(var[i] + float(sigma) ** 2) / unit
                 out[col + "_pi_lo95"], out[col + "_pi_hi95"] = v - half_p, v + half_p
     note = "; ".join(f"{col} empty: it depends on {k}, not identified by the fit" for col, k in why.items())
-    out["note"] = note
+    notes = [[note] if note else [] for _ in range(len(out))]
+    # at rest the torque lies anywhere within static friction, which a running fit does not give
+    rest = np.abs(np.asarray(table.speed, float)) < STALL_SPEED
+    for col in ("torque_Nm", "volumetric_efficiency", "hydromechanical_efficiency", "overall_efficiency"):
+        for suffix in ("", "_lo95", "_hi95", "_pi_lo95", "_pi_hi95"):
+            if col + suffix in out:
+                out.loc[rest, col + suffix] = np.nan
+    for i in np.flatnonzero(rest):
+        notes[i].append("at rest: the torque lies anywhere within static friction (not predicted), and no "
+                        "power flows (no efficiency)")
+    # an efficiency outside [0, 1]: power in at both the shaft and the ports (friction above the ideal
+    # torque, leakage above the swept flow), neither a motor nor a pump: no ratio of output to input
+    eff = out[["volumetric_efficiency", "hydromechanical_efficiency", "overall_efficiency"]].to_numpy(float)
+    dissipating = ~rest & np.any((eff < 0) | (eff > 1), axis=1)
+    for col in ("volumetric_efficiency", "hydromechanical_efficiency", "overall_efficiency"):
+        for suffix in ("", "_lo95", "_hi95"):
+            out.loc[dissipating, col + suffix] = np.nan
+    for i in np.flatnonzero(dissipating):
+        notes[i].append("no efficiency: the model's power balance here is not that of a motor or a pump "
+                        "(power in at both the shaft and the ports)")
+    for i, words in _outside(doc, table).items():
+        notes[i].append(words)
+    out["note"] = ["; ".join(n) for n in notes]
+    return out
+
+
+def _outside(doc: dict, table) -> dict:
+    """point index → words on where it lies outside the region the fit saw (result.json's
+    ``table.ranges``; a fit of logs alone keeps none, and says nothing)."""
+    ranges = (doc.get("table") or {}).get("ranges") or {}
+    values = {"speed_rad_s": (np.abs(np.asarray(table.speed, float)), "speed", 60 / (2 * np.pi), "rpm"),
+              "dp_Pa": (np.abs(np.asarray(table.dp, float)), "|ΔP|", 1e-5, "bar"),
+              "viscosity_Pa_s": (np.asarray(table.viscosity, float), "viscosity", 1e3, "mPa·s")}
+    out: dict = {}
+    for key, (lo, hi) in ranges.items():
+        if key not in values:
+            continue
+        v, words, f, unit = values[key]
+        slack = 0.02 * max(hi - lo, abs(hi))  # one level (one speed, one viscosity): 2 % of it
+        for i in np.flatnonzero((v < lo - slack) | (v > hi + slack)):
+            part = f"{words} {v[i] * f:.4g} {unit} outside the fitted {lo * f:.4g}-{hi * f:.4g} {unit}"
+            out[int(i)] = (out[int(i)] + ", " if int(i) in out else "extrapolated: ") + part
     return out
 
 

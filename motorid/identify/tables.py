@@ -119,10 +119,11 @@ def table_coverage_reasons(table, spec, names: Sequence[str]) -> dict:
     for k in ("KFS", "Ks"):
         reasons[k] = NO_BREAKAWAY
     flows = {c: np.isfinite(m[c]) for c in ("q_a", "q_b", "q_case")}
-    case_info = flows["q_case"] | (flows["q_a"] & flows["q_b"])
-    if case_info.sum() < 3:
-        reasons["KL0"] = "the table has no case-drain flow (nor both port flows)"
     port = flows["q_a"] | flows["q_b"]
+    if (flows["q_case"] | port).sum() < 3:
+        # a port flow alone also carries K_L0 (its port's leakage to the case): whether it tells
+        # K_L0 from K_AB is the data's to say (the null space of the fit), not a rule's
+        reasons["KL0"] = "the table has no flow column (or fewer than 3 flow readings)"
     if port.sum() < 3:
         reasons["KAB"] = "the table has no port flow (K_AB shows only in the port flows)"
     elif np.all(np.abs(table.dp[port]) < 1e3):
@@ -489,4 +490,17 @@ def table_document(tf: TableFit) -> dict:
         "variable_displacement": bool(t.variable_displacement),
         "residual_rms": {c: (float(np.sqrt(np.nanmean(r**2))) if np.isfinite(r).any() else None)
                          for c, r in tf.table_residuals.items()},
+        "ranges": operating_ranges(t),
     }
+
+
+def operating_ranges(table) -> dict:
+    """The operating region a table fit saw (``motorid predict`` says where it extrapolates):
+    |speed| [rad/s], |ΔP| [Pa], viscosity [Pa·s] → [min, max]."""
+    out = {}
+    for name, v in (("speed_rad_s", np.abs(table.speed)), ("dp_Pa", np.abs(table.dp)),
+                    ("viscosity_Pa_s", np.asarray(table.viscosity, float))):
+        v = np.asarray(v, float)[np.isfinite(v)]
+        if v.size:
+            out[name] = [float(v.min()), float(v.max())]
+    return out

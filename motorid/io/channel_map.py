@@ -42,6 +42,8 @@ _DISPLACEMENT = {"cm3": 1.0, "cm3_rev": 1.0, "cc": 1.0, "cc_rev": 1.0, "ml": 1.0
                  "in3": _IN3 * 1e6, "in3_rev": _IN3 * 1e6, "m3": 1e6, "m3_rev": 1e6, "m3_rad": 2e6 * math.pi,
                  "l": 1e3, "l_rev": 1e3}
 _NONE = {"": 1.0, "1": 1.0, "count": 1.0}
+_ABSOLUTE_UNITS = ("psia", "bara", "bar_a")
+_GAUGE_UNITS = ("psig", "barg", "bar_g")
 
 # family → (units → factor to SI (or callable/tuple as in motorid.io.logs), SI per format unit)
 _FAMILIES = {
@@ -217,6 +219,12 @@ def _text(raw: np.ndarray) -> np.ndarray:
 def _numeric(raw: np.ndarray, file_label: str, ch: Channel, offset: int = 0) -> np.ndarray:
     if raw.dtype.kind in "fiub":
         return raw.astype(float)
+    if raw.dtype.kind in "mM":  # a timestamp (as NI and MDF loggers write the time track): seconds
+        if ch.column != "time_s" or ch.unit != "s":
+            raise InputError(f"{file_label}: channel '{ch.name}' ({ch.column}) holds timestamps: map it as "
+                             f"time_s with unit = \"s\" (it is read as seconds)")
+        seconds = raw.astype("m8[ns]" if raw.dtype.kind == "m" else "M8[ns]").astype(np.int64) / 1e9
+        return np.where(np.isnat(raw), np.nan, seconds)
     values = pd.to_numeric(pd.Series(raw.ravel()), errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(np.isnan(values) & ~pd.isna(pd.Series(raw.ravel())).to_numpy())
     if bad.size:
@@ -284,9 +292,15 @@ def _channel(where: str, column: str, spec) -> Channel:
         ch.scale = _number(where, spec["scale"], "scale")
     if "offset" in spec:
         ch.offset = _number(where, spec["offset"], "offset")
-    absolute = spec.get("absolute", False)
+    # a unit that says absolute (psia, bara) is absolute; one that says gauge (psig, barg) is not
+    says = None if column == "dp_bar" else "absolute" if unit in _ABSOLUTE_UNITS else \
+        "gauge" if unit in _GAUGE_UNITS else None
+    absolute = spec.get("absolute", says == "absolute")
     if not isinstance(absolute, bool):
         raise InputError(f"{where}: absolute must be true or false, got {absolute!r}")
+    if says is not None and absolute != (says == "absolute"):
+        raise InputError(f"{where}: unit '{spec.get('unit')}' is {'an' if says == 'absolute' else 'a'} {says} pressure, but absolute = "
+                         f"{'true' if absolute else 'false'}")
     if "atmosphere" in spec and not absolute:
         raise InputError(f"{where}: 'atmosphere' needs absolute = true")
     if absolute:
@@ -396,6 +410,11 @@ def parse_channel_map(doc: dict, path: str) -> ChannelMap:
 
 def _check_complete(cmap: ChannelMap):
     given = set(cmap.channels) | set(cmap.constants) | set(cmap.absent)
+    only_logs = [c for c in ("protocol", "shaft_angle_deg") if c in cmap.channels]
+    if not cmap.is_log and only_logs:
+        raise InputError(f"{cmap.path}: [channels] maps {', '.join(only_logs)}, which only a time series has, but "
+                         "no time_s: map the time channel for a bench log (or leave those out for an "
+                         "operating-point table)")
     if cmap.is_log:
         missing = [c for c in LOG_REQUIRED if c not in given and c != "run_id"]
         if missing:

@@ -306,11 +306,52 @@ def _columns_of(path, arrays: dict) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
+class _QuietTruncation:
+    """npTDMS's two warning lines on a last segment shorter than announced, held back from the console
+    while a file opens (only those: every other record passes; the filter comes off when the block
+    ends): :func:`_check_tdms_complete` then says it in one line, or nothing where no data is missing."""
+
+    MESSAGES = ("less data than expected", "not a multiple of the chunk size")
+
+    def __enter__(self):
+        import logging
+
+        from nptdms.log import log_manager
+
+        self.handler, self.filter = log_manager.console_handler, logging.Filter()
+        self.filter.filter = lambda record: not any(m in record.getMessage() for m in self.MESSAGES)
+        self.handler.addFilter(self.filter)
+        return self
+
+    def __exit__(self, *exc):
+        self.handler.removeFilter(self.filter)
+        return False
+
+
+def _check_tdms_complete(path: Path, tdms) -> None:
+    """Refuse a TDMS file whose last segment holds fewer samples of a channel than its header
+    announces (a DAQ stopped mid-write, a copy interrupted): npTDMS reads what is there, and the fit
+    would take part of the data.  A last segment left open by its writer with its data whole (a state
+    the format allows) passes (npTDMS ``TdmsFile.file_status``)."""
+    statuses = getattr(tdms.file_status, "channel_statuses", None) or {}
+    for name, st in statuses.items():
+        if st.read_length < st.expected_length:
+            raise InputError(f"{path}: cut short: its last segment holds {st.read_length} of the "
+                             f"{st.expected_length} samples its header announces for {name}")
+
+
 def _tdms(path: Path, group: str | None, stream: bool = False):
     from nptdms import TdmsFile
 
     # stream: the file's index only; each read takes the samples it asks for (TdmsFile.open)
-    tdms = TdmsFile.open(str(path)) if stream else TdmsFile.read(str(path))
+    with _QuietTruncation():
+        tdms = TdmsFile.open(str(path)) if stream else TdmsFile.read(str(path))
+    try:
+        _check_tdms_complete(path, tdms)
+    except InputError:
+        if stream:
+            tdms.close()
+        raise
 
     class _Tdms:
         def names(self):
@@ -349,7 +390,8 @@ def _tdms(path: Path, group: str | None, stream: bool = False):
                     raise InputError(f"{path}: channel '{name[:-5]}' has no waveform timing ({exc})") from None
                 return t if start is None else t[start:stop]
             ch = self._channel(name)
-            return np.asarray(ch[:] if start is None else ch[start:stop])
+            with _QuietTruncation():
+                return np.asarray(ch[:] if start is None else ch[start:stop])
 
         def close(self):
             if stream:
@@ -565,6 +607,9 @@ def read_foreign(path, spec=None, channels=None) -> pd.DataFrame:
             msg = re.sub(r"\bline (\d+)", lambda m: f"row {int(m.group(1)) - 1}", msg)
             if cmap is not None:
                 msg += f" (read through {cmap.path})"
+            elif "missing required column" in msg:
+                msg += ("; its channels were taken by name as the format's columns: map them once in a channel "
+                        "map (--channels MAP.toml, or channels.toml beside the file; docs/formats.md)")
             raise InputError(msg) from None
     frame["file"] = pd.Categorical.from_codes(np.zeros(len(frame), dtype=np.int8),
                                               categories=pd.Index([str(path)], dtype=object))

@@ -93,6 +93,10 @@ _SPEED_UNITS = {"rad_s": 1.0, "rpm": RAD_S_PER_RPM, "rev_min": RAD_S_PER_RPM,
                 "rps": 2.0 * np.pi, "rev_s": 2.0 * np.pi, "hz": 2.0 * np.pi}
 _TORQUE_UNITS = {"nm": 1.0, "n_m": 1.0, "knm": 1e3, "kn_m": 1e3, "lbf_ft": NM_PER_LBF_FT, "ft_lbf": NM_PER_LBF_FT,
                  "lbf_in": NM_PER_LBF_FT / 12.0, "in_lbf": NM_PER_LBF_FT / 12.0}
+# "lbf·in", "lbf*ft", "in.lb" normalize without their separator; "lb" for "lbf", as makers write it
+_TORQUE_UNITS.update({f"{a}{sep}{b}": _TORQUE_UNITS["lbf_ft" if "ft" in (a, b) else "lbf_in"]
+                      for a, b in (("lbf", "ft"), ("ft", "lbf"), ("lbf", "in"), ("in", "lbf"), ("lb", "ft"),
+                                   ("ft", "lb"), ("lb", "in"), ("in", "lb")) for sep in ("", "_")})
 _PRESSURE_UNITS = {"pa": 1.0, "kpa": 1e3, "mpa": 1e6, "bar": PA_PER_BAR, "barg": PA_PER_BAR, "bar_g": PA_PER_BAR,
                    "mbar": 1e2, "psi": PA_PER_PSI, "psig": PA_PER_PSI}
 _FLOW_UNITS = {"m3_s": 1.0, "m3_h": 1.0 / 3600.0, "l_s": 1e-3, "lps": 1e-3, "lpm": M3S_PER_LPM,

@@ -389,6 +389,11 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
         notes.append(f"{path.name}: {int(stall.sum())} torque reading(s) at zero speed (line {lines[stall][0]} "
                      f"first) set aside: a held shaft's torque lies anywhere within its static friction, which "
                      f"a steady table cannot fit (startability runs do: ISO 4392-2); their flows are kept")
+    if "dp_Pa" in found and any(np.isfinite(measured[c]).any() for c in ("q_a", "q_b", "q_case")):
+        notes.append(f"{path.name}: the table gives ΔP alone: the low-pressure port is taken at 0 bar gauge "
+                     f"(BENCH_LOG_FORMAT.md); the leakage to the case follows the port pressures, so on a map "
+                     f"run at a boost pressure give p_a_bar and p_b_bar instead (a channel map may build them "
+                     f"from one ΔP channel with offset = the boost)")
     recording = None
     if "recording" in found:
         # an empty cell: a point of no named recording (never given a recording's own viscosity)
@@ -471,14 +476,13 @@ def read_tables(paths, spec=None, require_outputs: bool = True, channels=None) -
     """Read one or several tables (see :func:`read_table`) as one; a file in a foreign format,
     or any file where ``channels`` (a channel map for tables) is given, through
     :func:`read_mapped_table`."""
-    from motorid.io.formats import needs_foreign_reader
-
+    from motorid.io.formats import find_channel_map, needs_foreign_reader
     from motorid.io.logs import refuse_repeats
 
     refuse_repeats(paths, "table")
     out = []
     for p in paths:
-        if channels is not None or needs_foreign_reader(p):
+        if channels is not None or needs_foreign_reader(p) or find_channel_map(p) is not None:
             out.append(read_mapped_table(p, spec, channels, require_outputs))
         else:
             out.append(read_table(p, spec, require_outputs))
@@ -525,14 +529,29 @@ def split_logs_and_tables(paths, channels=None) -> tuple[list, list]:
             files.append(p)
     logs, tables = [], []
     for f in files:
-        (tables if _is_table_file(f) else logs).append(f)
+        (tables if _is_table_file(f, cmap) else logs).append(f)
     return logs, tables
 
 
-def _is_table_file(path) -> bool:
-    """A foreign file with a channel map beside it (formats.find_channel_map): a table where the map
-    has no time_s; any other file: :func:`is_table` (its header has no time column)."""
-    from motorid.io.formats import find_channel_map, needs_foreign_reader
+def _is_table_file(path, cmap=None) -> bool:
+    """Whether ``path`` is an operating-point table.  Under a channel map (``cmap``, the one given,
+    else the one beside the file: formats.find_channel_map, which the log reader applies too): a
+    table where the map has no time_s; with time_s a bench log, unless the file is delimited text
+    whose header holds neither the map's time channel nor a time column (a native table given with
+    the logs' map).  Without a map: :func:`is_table` (its header has no time column)."""
+    from motorid.io.formats import SUFFIXES, _suffix, find_channel_map, needs_foreign_reader
 
-    beside = find_channel_map(path) if needs_foreign_reader(path) else None
-    return is_table(path) if beside is None else not _table_map(beside).is_log
+    if cmap is None:
+        beside = find_channel_map(path)
+        cmap = _table_map(beside) if beside is not None else None
+    if cmap is None:
+        return is_table(path)
+    if not cmap.is_log:
+        return True
+    if SUFFIXES.get(_suffix(Path(path))) not in ("csv", "text") or needs_foreign_reader(path) or cmap.file:
+        return False  # (a map that says how to read the text, e.g. its header row: its file is its log)
+    try:
+        fields = [f.strip() for f in _split_header(Path(path), _head_text(Path(path)))[0]]
+    except (OSError, InputError, IndexError):
+        return False  # the log reader says what is wrong with it
+    return cmap.channels["time_s"].name.strip() not in fields and is_table(path)

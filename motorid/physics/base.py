@@ -124,6 +124,12 @@ class Mechanism:
         """parameter → why a fit on ``table``'s points where ``train`` holds cannot give it."""
         return {}
 
+    def unseen_in_table(self, table) -> str | None:
+        """Why ``table``'s points cannot tell this mechanism from the physics it mimics (words), or
+        None where they can: diagnose does not try it on such a table (a flow meter's error needs the
+        meters' mass balance, which only a table of all three flows holds)."""
+        return None
+
     def static_limit(self, params: dict, spec, events: Samples, limit):
         """Change the static friction limit T_break at breakaway events [N·m]."""
         return limit

@@ -121,3 +121,43 @@ def flow_zeros_wander(dataset) -> bool:
     if _LAST[0] is not dataset:
         _LAST[:] = [dataset, flow_balance(dataset)]
     return bool(_LAST[1] is not None and _LAST[1]["offsets"])
+
+
+#: |t| the mass balance of a table's points must reach for a flow meter's error to be named there
+TABLE_BALANCE_T = 3.0
+#: points with all three flows a table needs for its mass balance
+TABLE_BALANCE_POINTS = 6
+
+
+def table_balance_shows(table, channel: str, gain: bool) -> str | None:
+    """Whether the mass balance b = Q_A + Q_B − Q_case of a table's points (Bartos 1992 Eq. 59-61,
+    which the motor keeps exactly) shows an error of the ``channel`` meter: a zero moves b by one
+    constant (−c for the case meter), a gain by g·Q of that meter.  b is regressed on that shape
+    (a gain's with an intercept, for zeros the meters may also have); the error shows where the
+    coefficient's |t| reaches :data:`TABLE_BALANCE_T` → None, else the reason in words."""
+    m = table.measured
+    qa, qb, qc = (np.asarray(m[c], dtype=float) for c in ("q_a", "q_b", "q_case"))
+    ok = np.isfinite(qa) & np.isfinite(qb) & np.isfinite(qc)
+    if ok.sum() < TABLE_BALANCE_POINTS:
+        return ("the table does not hold all three flows at enough points for the meters' mass balance "
+                "Q_A + Q_B = Q_case: a flow meter's error cannot be told from a leakage law")
+    b = (qa + qb - qc)[ok]
+    shape = {"q_a": qa, "q_b": qb, "q_case": qc}[channel][ok]
+    size = max(float(np.max(np.abs(np.concatenate([qa[ok], qb[ok], qc[ok]])))), 1e-300)
+    if np.max(np.abs(b)) <= 1e-9 * size:  # a table whose case flow is the sum of the port flows
+        return ("the table's case flow is the sum of its port flows (its mass balance holds by construction): "
+                "a flow meter's error cannot be seen in it")
+    X = np.column_stack([shape, np.ones_like(shape)]) if gain else np.ones((b.size, 1))
+    coef, *_ = np.linalg.lstsq(X, b, rcond=None)
+    dof = b.size - X.shape[1]
+    s2 = float(np.sum((b - X @ coef) ** 2)) / max(dof, 1)
+    try:
+        se = float(np.sqrt(s2 * np.linalg.inv(X.T @ X)[0, 0]))
+    except np.linalg.LinAlgError:
+        se = np.inf
+    t = abs(float(coef[0])) / se if se > 0 else np.inf
+    if t >= TABLE_BALANCE_T:
+        return None
+    what = "in proportion to that meter's flow" if gain else "by a constant"
+    return (f"the meters' mass balance Q_A + Q_B − Q_case over the table's {b.size} points does not move {what} "
+            f"(|t| = {t:.2g} < {TABLE_BALANCE_T:g}): the meter's error cannot be told from a leakage law")

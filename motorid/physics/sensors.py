@@ -171,6 +171,16 @@ class _LinearReading(CatalogMechanism):
 
         return not flow_zeros_wander(dataset)
 
+    def unseen_in_table(self, table) -> str | None:
+        """A flow meter's error is named on a table only where the meters' own mass balance shows it:
+        without it a zero or a gain of one meter is a leakage law in other words (a constant case
+        flow is the low-pressure port's leakage at one boost pressure and temperature)."""
+        if self.channel == "torque":
+            return None
+        from motorid.physics.mass_balance import table_balance_shows
+
+        return table_balance_shows(table, self.channel, gain=isinstance(self, MeterGain))
+
 
 class MeterGain(_LinearReading):
     """A transducer reading (1 + g) times the true value of one channel [-]."""

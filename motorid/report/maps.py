@@ -194,8 +194,8 @@ def rerender_map_report(out_dir, motor=None) -> Path:
     from motorid.errors import InputError
     from motorid.identify.predict import fitted_parameters, load_result
     from motorid.identify.tables import bind_mechanisms, point_channels, table_samples
-    from motorid.io.tables import read_tables
     from motorid.io.spec import load_motor_spec
+    from motorid.io.tables import read_tables, split_channel_map
 
     doc, spec, mechanisms = load_result(out_dir, load_motor_spec(motor) if motor else None)
     paths = doc.get("inputs", {}).get("tables") or []
@@ -203,7 +203,11 @@ def rerender_map_report(out_dir, motor=None) -> Path:
     if not paths or missing:
         raise InputError(f"{Path(out_dir) / 'result.json'}: the table {missing[0] if missing else '(none named)'} "
                          f"it was fitted on is not found")
-    table = read_tables(paths, spec)
+    channels = doc.get("inputs", {}).get("channels")
+    if channels and not Path(channels).exists():
+        raise InputError(f"{Path(out_dir) / 'result.json'}: the channel map {channels} the tables were read "
+                         "through is not found")
+    table = read_tables(paths, spec, channels=split_channel_map(channels)[0] if channels else None)
     params = fitted_parameters(doc, spec, mechanisms)[0]
     ch = point_channels(params, spec, table_samples(spec, table),
                         table.displacement if table.variable_displacement else None,

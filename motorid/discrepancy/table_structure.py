@@ -1,0 +1,122 @@
+"""Structure left in the residuals of a table fit, judged against the points' own noise.
+
+The table counterpart of :func:`motorid.discrepancy.locate.locate`: after a fit on
+operating points every channel's residual over its σ should scatter as unit noise
+with no trend along any operating variable.  The points are grouped along |ω|,
+direction, |ΔP|, port-pressure sum P_A + P_B, viscosity, operating mode (motor /
+pump) and recording; each group's summed z-score over √n is a standard normal
+under the model, and Σ z_g² over a variable's groups is tested as χ² (dof = the
+number of groups; the fitted parameters only shrink it, so the test errs on the
+side of silence).  A structure counts where p is below ``alpha`` over the number
+of tests (Bonferroni) and its largest group mean is at least ``min_effect`` of the
+channel's noise level.  This is what makes a misfit that no term of the empirical
+library takes (a friction with a hump in ΔP) a reported mismatch, in words and
+numbers, rather than nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from motorid.discrepancy.locate import (CHANNEL_WORDS, _bar, _chi2_sf, _fmt, _Labels, _mpas, _quantile_groups,
+                                        _rpm, trend_words)
+from motorid.identify.identifiability import relative_spread
+from motorid.physics.efficiency import operating_mode
+
+CHANNELS = ("torque", "q_a", "q_b", "q_case")
+
+
+def _variables(table) -> dict:
+    """variable → point labels (None where the table does not vary along it)."""
+    w = np.asarray(table.speed, float)
+    pa, pb = np.asarray(table.p_a, float), np.asarray(table.p_b, float)
+    out = {
+        "speed": _quantile_groups(np.abs(w), 5, fmt=_rpm),
+        "pressure difference": _quantile_groups(np.abs(pa - pb), 5, fmt=_bar),
+        "port-pressure sum": _quantile_groups(pa + pb, 4, fmt=_bar),
+        "viscosity": _quantile_groups(np.asarray(table.viscosity, float), 4, fmt=_mpas),
+    }
+    sign = np.where(w > 0, "positive rotation", np.where(w < 0, "negative rotation", None))
+    if len({s for s in sign if s is not None}) == 2:
+        out["direction"] = _Labels(sign, ["positive rotation", "negative rotation"])
+    mode = operating_mode(w, pa, pb)
+    if {"motor", "pump"} <= set(mode):
+        out["operating mode"] = _Labels(np.where(mode == "none", None, mode), ["motor", "pump"])
+    # a variable held within its scatter (one speed, one temperature) is no variable: its quantile
+    # groups would share one label and count the same points several times
+    for name, v in (("speed", np.abs(w)), ("pressure difference", np.abs(pa - pb)), ("port-pressure sum", pa + pb),
+                    ("viscosity", np.asarray(table.viscosity, float))):
+        if out[name] is not None and relative_spread(v) < 0.05:
+            out[name] = None
+        elif out[name] is not None:
+            out[name].unique_order = list(dict.fromkeys(out[name].unique_order))
+    rec = table.recordings()
+    names = list(dict.fromkeys(str(r) for r in rec))
+    if len(names) >= 2:
+        out["recording"] = _Labels(np.array([str(r) for r in rec], dtype=object), names)
+    return {k: v for k, v in out.items() if v is not None and len(v.unique_order) >= 2}
+
+
+def table_structures(fit, alpha: float = 1e-3, min_effect: float = 0.3) -> list:
+    """The significant and relevant structures of a table fit's residuals (:class:`TableFit`)
+    → [dict(channel, variable, statistic, dof, p_value, effect [SI], effect_sigma, where, groups)],
+    strongest first."""
+    table = fit.table
+    variables = _variables(table)
+    found = []
+    for c in CHANNELS:
+        r = np.asarray(fit.table_residuals[c], float)
+        sig = np.asarray(fit.table_sigma[c], float)
+        ok = np.isfinite(r) & np.isfinite(sig) & (sig > 0)
+        if ok.sum() < 10:
+            continue
+        z = np.where(ok, r / np.where(ok, sig, 1.0), 0.0)
+        # a loss (friction, leakage) keeps its sense to the rotation: in a map of both directions its
+        # residual changes sign with ω, and a mean over the directions would cancel it
+        senses = [("", 1.0)]
+        if "direction" in variables:
+            senses.append((" (taken in the sense of rotation)", np.sign(np.asarray(table.speed, float))))
+        for sense, sgn in senses:
+            zs, rs = z * sgn, r * sgn
+            for var, labels in variables.items():
+                if sense and var == "direction":
+                    continue
+                groups, stat = [], 0.0
+                for lab in labels.unique_order:
+                    sel = ok & (labels.values == lab)
+                    n = int(sel.sum())
+                    if n == 0:
+                        continue
+                    zg = float(zs[sel].sum() / np.sqrt(n))
+                    stat += zg * zg
+                    groups.append((lab, float(np.mean(rs[sel])), zg, float(np.median(sig[sel])), n))
+                if len(groups) < 2:
+                    continue
+                worst = max(groups, key=lambda g: abs(g[2]))
+                verb = "falls short of the model" if worst[1] < 0 else "exceeds the model"
+                at = {"direction": "in", "operating mode": "in", "recording": "in recording"}.get(var, f"at {var}")
+                found.append({"channel": c, "variable": var, "statistic": stat, "dof": len(groups),
+                              "p_value": _chi2_sf(stat, len(groups)), "effect": worst[1],
+                              "effect_sigma": abs(worst[1]) / worst[3] if worst[3] > 0 else np.inf,
+                              "where": f"{CHANNEL_WORDS[c]}{sense} {at} {worst[0]} {verb} by "
+                                       f"{_fmt(abs(worst[1]), c)} on average ({worst[4]} points, "
+                                       f"{abs(worst[2]):.3g} standard errors)",
+                              "groups": [(g[0], g[1], g[2]) for g in groups]})
+    tests = max(len(found), 1)
+    out = [s for s in found if s["p_value"] < alpha / tests and s["effect_sigma"] >= min_effect]
+    return sorted(out, key=lambda s: s["p_value"])
+
+
+def shape_words(structures: list) -> str:
+    """How the residual runs along each variable of ``structures`` (one channel's), in words: per
+    variable its strongest structure (as signed, or in the sense of rotation)."""
+    words = []
+    strongest: dict = {}
+    for s in sorted(structures, key=lambda s: s["p_value"]):
+        strongest.setdefault(s["variable"], s)
+    for s in strongest.values():
+        if s["variable"] not in ("direction", "operating mode", "recording"):
+            trend = trend_words([g[1] for g in s["groups"]], s["variable"])
+            if trend:
+                words.append(trend)
+    return ", ".join(words)
