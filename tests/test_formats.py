@@ -508,7 +508,8 @@ def test_a_tdms_file_cut_short_is_refused_in_one_line(segments, campaign, tmp_pa
     path.write_bytes(data[: int(len(data) * 0.6)])
     cmap = tmp_path / "map.toml"
     cmap.write_text(map_text(prefix="Measurement/"))
-    with pytest.raises(InputError, match=r"cut.tdms: cut short: its last segment holds \d+ of the \d+ samples its header announces"):
+    with pytest.raises(InputError, match=r"cut.tdms: cut short: its last segment holds \d+ of the \d+ samples "
+                                         r"its header announces"):
         read_logs(path, load_motor_spec(MOTOR), channels=cmap)
     assert "nptdms" not in capsys.readouterr().err
 
@@ -528,3 +529,32 @@ def test_a_unit_mistake_the_shaft_angle_contradicts_is_refused(edit, words, camp
     err = _cli_fails(["fit", str(path), "--channels", str(cmap), "--motor", str(MOTOR), "--out",
                       str(tmp_path / "out")], capsys)
     assert "the shaft angle advances at" in err and words in err
+
+
+@pytest.mark.parametrize("kind", ["xlsx", "csv"])
+def test_a_units_row_under_the_header_is_skipped(kind, tmp_path):
+    """Makers' sheets put the units in the row under the names ('rpm', 'bar', …): it was read as the
+    first point ('rpm' is not a number); [file] skip_rows = 1 leaves it out."""
+    from motorid.io.tables import read_tables
+
+    spec = load_motor_spec(MOTOR)
+    rows = [["n", "pA", "pB", "M"], ["rpm", "bar", "bar", "N·m"], [1000, 150, 0, 170.5], [2000, 250, 0, 290.25]]
+    if kind == "xlsx":
+        from openpyxl import Workbook
+
+        wb = Workbook()
+        for r in rows:
+            wb.active.append(r)
+        path = tmp_path / "maker.xlsx"
+        wb.save(path)
+    else:
+        path = tmp_path / "maker.csv"
+        path.write_text("\n".join(";".join(str(v).replace(".", ",") for v in r) for r in rows) + "\n")
+    cmap = tmp_path / "maker.toml"
+    cmap.write_text('[file]\nskip_rows = 1\n[constants]\noil_temp_C = 50.0\n[channels]\n'
+                    'speed_rpm = {name = "n", unit = "rpm"}\n'
+                    'p_a_bar = {name = "pA", unit = "bar"}\np_b_bar = {name = "pB", unit = "bar"}\n'
+                    'torque_Nm = {name = "M", unit = "N*m"}\n')
+    table = read_tables([path], spec, channels=cmap)
+    np.testing.assert_allclose(table.measured["torque"], [170.5, 290.25])
+    np.testing.assert_allclose(table.speed, np.array([1000, 2000]) * 2 * np.pi / 60)

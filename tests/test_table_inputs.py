@@ -180,6 +180,7 @@ def test_predict_says_where_it_cannot_or_where_it_extrapolates(made, monkeypatch
     assert np.isnan(pred.loc["rest", "torque_Nm"]) and "at rest" in pred.loc["rest", "note"]
     assert np.isfinite(pred.loc["rest", "q_case_lpm"])
     assert pred.loc["idle", "torque_Nm"] < 0  # friction above the ideal torque at 1 bar
-    assert np.isnan(pred.loc["idle", "overall_efficiency"]) and "not that of a motor or a pump" in pred.loc["idle", "note"]
+    assert np.isnan(pred.loc["idle", "overall_efficiency"])
+    assert "not that of a motor or a pump" in pred.loc["idle", "note"]
     assert pred.loc["inside", "note"] == "" and 0 < pred.loc["inside", "overall_efficiency"] < 1
     assert "extrapolated: |ΔP| 600 bar outside the fitted 50-250 bar" in pred.loc["high", "note"]

@@ -76,7 +76,7 @@ PUMP_SIGN = ("torque_Nm", "q_a_lpm", "q_b_lpm")  # negated by convention = "pump
 FORMATS = ("csv", "text", "mat", "hdf5", "parquet", "xlsx", "tdms", "mdf")
 
 _TOP_KEYS = {"file", "convention", "channels", "constants", "absent", "extra", "grid"}
-_FILE_KEYS = {"format", "sheet", "header_row", "delimiter", "decimal", "group"}
+_FILE_KEYS = {"format", "sheet", "header_row", "skip_rows", "delimiter", "decimal", "group"}
 _CHANNEL_KEYS = {"name", "unit", "sign", "scale", "offset", "absolute", "atmosphere"}
 
 
@@ -299,7 +299,8 @@ def _channel(where: str, column: str, spec) -> Channel:
     if not isinstance(absolute, bool):
         raise InputError(f"{where}: absolute must be true or false, got {absolute!r}")
     if says is not None and absolute != (says == "absolute"):
-        raise InputError(f"{where}: unit '{spec.get('unit')}' is {'an' if says == 'absolute' else 'a'} {says} pressure, but absolute = "
+        article = "an" if says == "absolute" else "a"
+        raise InputError(f"{where}: unit '{spec.get('unit')}' is {article} {says} pressure, but absolute = "
                          f"{'true' if absolute else 'false'}")
     if "atmosphere" in spec and not absolute:
         raise InputError(f"{where}: 'atmosphere' needs absolute = true")
@@ -329,6 +330,9 @@ def parse_channel_map(doc: dict, path: str) -> ChannelMap:
     if "header_row" in file and (isinstance(file["header_row"], bool) or not isinstance(file["header_row"], int)
                                  or file["header_row"] < 1):
         raise InputError(f"{path}: [file] header_row: a line number ≥ 1, got {file['header_row']!r}")
+    if "skip_rows" in file and (isinstance(file["skip_rows"], bool) or not isinstance(file["skip_rows"], int)
+                                or file["skip_rows"] < 0):
+        raise InputError(f"{path}: [file] skip_rows: a number of rows ≥ 0, got {file['skip_rows']!r}")
     cmap.file = dict(file)
     convention = doc.get("convention", "motor")
     if convention not in ("motor", "pump"):

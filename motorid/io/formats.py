@@ -171,6 +171,13 @@ def read_text_table(path, options: dict | None = None) -> pd.DataFrame:
     try:
         fields, delim, decimal, start = sniff_text(text, options.get("delimiter"), options.get("decimal"),
                                                    options.get("header_row"))
+        skip = int(options.get("skip_rows", 0))  # rows under the header that are no data (a units row)
+        if skip:  # dropped, and the data's delimiter and decimal mark sniffed again without them
+            lines = text.splitlines()
+            drop = [k for k in range(start, len(lines)) if lines[k].strip()][:skip]
+            text = "\n".join(line for k, line in enumerate(lines) if k not in set(drop))
+            fields, delim, decimal, start = sniff_text(text, options.get("delimiter"), options.get("decimal"),
+                                                       options.get("header_row"))
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
     body = "\n".join(text.splitlines()[start:])
@@ -476,7 +483,9 @@ def open_source(path, cmap=None, stream: bool = False):
             return _Columns(path, pq.read_table(str(path)).to_pandas())
         if fmt == "xlsx":
             header = options.get("header_row", 1) - 1
-            frame = pd.read_excel(path, sheet_name=options.get("sheet", 0), header=header, engine="openpyxl")
+            skip = list(range(header + 1, header + 1 + int(options.get("skip_rows", 0))))  # a units row
+            frame = pd.read_excel(path, sheet_name=options.get("sheet", 0), header=header, skiprows=skip or None,
+                                  engine="openpyxl")
             return _Columns(path, frame)
         if fmt == "tdms":
             return _tdms(path, options.get("group"), stream)
