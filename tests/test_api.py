@@ -69,3 +69,28 @@ def test_import_motorid_is_light_and_lazy():
     assert run.returncode == 0, run.stderr
     with pytest.raises(AttributeError, match="no attribute 'fitt'"):
         motorid.fitt
+
+
+def test_predict_from_a_fit_of_logs_notes_the_points_outside_its_runs(both, tmp_path):
+    """A fit of logs keeps the steady running region it saw (result.json data.ranges): predict notes a
+    point beyond its fastest run as extrapolated, and none inside."""
+    import pandas as pd
+
+    from motorid.identify.predict import load_result, predict_points
+    from motorid.io.tables import read_tables
+
+    cli, _, tmp = both
+    lo, hi = cli["data"]["ranges"]["speed_rad_s"]
+    inside, outside = 0.5 * (lo + hi) * 60 / (2 * math.pi), 3.0 * hi * 60 / (2 * math.pi)
+    pd.DataFrame({"point_id": ["inside", "outside"], "speed_rpm": [inside, outside], "p_a_bar": [100.0, 100.0],
+                  "p_b_bar": [0.0, 0.0], "oil_temp_C": [cli_temp(cli)] * 2}).to_csv(tmp_path / "pts.csv", index=False)
+    result = load_result(tmp / "cli")
+    pred = predict_points(result, read_tables([tmp_path / "pts.csv"], result[1], require_outputs=False))
+    pred = pred.set_index("point_id")
+    assert "speed" not in pred.loc["inside", "note"]
+    assert f"extrapolated: speed {outside:.4g} rpm outside the fitted" in pred.loc["outside", "note"]
+
+
+def cli_temp(doc) -> float:
+    """A run's median oil temperature of the fitted campaign [°C]."""
+    return float(next(r["temp_median_C"] for r in doc["data"]["runs"] if r.get("n_steady")))

@@ -198,8 +198,8 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
 
 def _outside(doc: dict, table) -> dict:
     """point index → words on where it lies outside the region the fit saw (result.json's
-    ``table.ranges``; a fit of logs alone keeps none, and says nothing)."""
-    ranges = (doc.get("table") or {}).get("ranges") or {}
+    ``table.ranges``, or ``data.ranges`` of a fit of logs: its steady running samples)."""
+    ranges = (doc.get("table") or {}).get("ranges") or (doc.get("data") or {}).get("ranges") or {}
     values = {"speed_rad_s": (np.abs(np.asarray(table.speed, float)), "speed", 60 / (2 * np.pi), "rpm"),
               "dp_Pa": (np.abs(np.asarray(table.dp, float)), "|ΔP|", 1e-5, "bar"),
               "viscosity_Pa_s": (np.asarray(table.viscosity, float), "viscosity", 1e3, "mPa·s")}

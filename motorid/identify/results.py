@@ -128,7 +128,17 @@ def dataset_summary(ds) -> dict:
         p["runs"] += 1
         p["samples"] += int(r.get("n_samples", 0) or 0)
         p["steady"] += int(r.get("n_steady", 0) or 0)
+    out_ranges = {}
+    s = getattr(ds, "running", None)
+    if s is not None and np.size(s.speed):
+        for name, v in (("speed_rad_s", np.abs(np.asarray(s.speed, float))),
+                        ("dp_Pa", np.abs(np.asarray(s.p_a, float) - np.asarray(s.p_b, float))),
+                        ("viscosity_Pa_s", np.asarray(s.viscosity, float))):
+            v = v[np.isfinite(v)]
+            if v.size:
+                out_ranges[name] = [float(v.min()), float(v.max())]
     return {
+        "ranges": out_ranges,  # the steady running region the fit saw (motorid predict notes points outside)
         "protocols": by_protocol,
         "runs": runs,
         "events": int(np.asarray(ds.held_torque).size) if getattr(ds, "held_torque", None) is not None else 0,
