@@ -78,6 +78,14 @@ def test_a_flow_meter_error_is_named_on_a_table_only_where_the_meters_mass_balan
     assert offset.unseen_in_table(shifted) is None
     scaled = _table(spec, df.assign(q_a_lpm=df.q_a_lpm * 1.01), tmp_path / "scaled.csv")
     assert gain.unseen_in_table(scaled) is None
+    # the oil compressed between meters at different pressures (Q·|ΔP|/β, β = 15 000 bar): no meter is wrong
+    squeeze = 1.0 - (df.p_a_bar - df.p_b_bar).abs() / 15000.0
+    compressed = _table(spec, df.assign(q_a_lpm=df.q_a_lpm * squeeze, q_b_lpm=df.q_b_lpm * squeeze),
+                        tmp_path / "compressed.csv")
+    assert gain.unseen_in_table(compressed) is not None
+    both = _table(spec, df.assign(q_a_lpm=df.q_a_lpm * squeeze * 1.01, q_b_lpm=df.q_b_lpm * squeeze),
+                  tmp_path / "both.csv")
+    assert gain.unseen_in_table(both) is None
     no_case = _table(spec, df.drop(columns=["q_case_lpm"]), tmp_path / "two.csv")
     assert "all three flows" in offset.unseen_in_table(no_case)
 
