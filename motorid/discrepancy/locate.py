@@ -182,8 +182,9 @@ def _quantile_groups(x, n_groups, log=False, fmt=str):
         if not sel.any():
             continue
         lo, hi = vals[sel].min(), vals[sel].max()
-        lab = fmt(lo) if np.isclose(lo, hi) else f"{fmt(lo)} to {fmt(hi)}"
-        order.append(lab)
+        lab = fmt(lo) if np.isclose(lo, hi) or fmt(lo) == fmt(hi) else f"{fmt(lo)} to {fmt(hi)}"
+        if lab not in order:  # groups that read alike (within the words' precision) are one group
+            order.append(lab)
         lab_of[sel] = lab
     return _Labels(lab_of, order)
 

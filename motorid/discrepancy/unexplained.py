@@ -168,6 +168,12 @@ def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = 
             ok_c = np.asarray(final.inliers[c])
             noise = float(np.median(np.asarray(final.sigma[c])[ok_c])) if ok_c.any() else None
             spread = run_spread(final.residuals[c], ok_c, dataset, noise)
+            if spread["offset_like"] and balance is not None and c in ("q_a", "q_b", "q_case") and \
+                    not balance["offsets"]:
+                # the meters' own mass balance keeps still from run to run: no zero wanders (a port-local
+                # law moves to the other port with the direction, and fails the twin test alone)
+                spread = dict(spread, offset_like=False, overruled_by="the flow meters' mass balance, which does "
+                              "not scatter from run to run beyond its noise")
             entry["run_spread"] = spread
             if spread["offset_like"]:  # issue 15: per-run zeros, said as such, never given a smooth law
                 words = (f"a spread of {_fmt(spread['tau'], c)} (σ) from run to run that runs at the same operating "

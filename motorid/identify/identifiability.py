@@ -108,3 +108,29 @@ def null_space_reasons(JtJ: np.ndarray, free: list, tol: float) -> dict:
             out.setdefault(k, "cannot be told apart from " + ", ".join(others) + " with these logs"
                            if others else "the logs do not determine it")
     return out
+
+
+#: spread (2-98 %) of the low-pressure port below which the points share one back pressure [Pa]
+ONE_BACK_PRESSURE_PA = 1e5
+
+
+def one_back_pressure_warning(low_port_pressure, kf) -> str:
+    """A warning where every running point has its low-pressure port at one pressure: the friction
+    K_F·D·(P_A + P_B) is then K_F·D·|ΔP| plus a constant, the shape a gain error g of the torque
+    transducer gives the ideal torque D·ΔP/2π, so K_F carries g/2π (a 1 % gain error moves it by
+    0.0016) and its std does not include it; "" where the back pressure varies.  Points at a second
+    back pressure tell them apart (diagnose's torque_meter_gain then shows).
+
+    low_port_pressure : min(P_A, P_B) of each running point [Pa]; kf : the fitted K_F [-]."""
+    low = np.asarray(low_port_pressure, dtype=float)
+    low = low[np.isfinite(low)]
+    if low.size < 2 or kf is None:
+        return ""
+    lo, hi = np.percentile(low, [2, 98])
+    if hi - lo > ONE_BACK_PRESSURE_PA:
+        return ""
+    share = f", {100 * 0.01 / (2 * np.pi) / abs(kf):.0f} % of this fit's K_F" if kf else ""
+    return (f"every running point has its low-pressure port at one pressure ({np.median(low) / 1e5:.3g} bar): "
+            f"K_F cannot be told from a gain error of the torque transducer, which it takes as g/2π (a 1 % "
+            f"gain error moves K_F by 0.0016{share}), and its std does not include it; runs at a second back "
+            f"pressure tell them apart")

@@ -7,6 +7,9 @@ import time
 from dataclasses import dataclass
 from typing import Sequence
 
+import numpy as np
+
+from motorid.identify.identifiability import one_back_pressure_warning
 from motorid.identify.least_squares import fit_least_squares
 from motorid.identify.types import FitOptions, FitResult
 
@@ -93,6 +96,15 @@ def viscosity_model_warning(frame, dataset, ls) -> str:
             f"and their std does not include it")
 
 
+def torque_gain_warning(dataset, ls) -> str:
+    """:func:`~motorid.identify.identifiability.one_back_pressure_warning` over the running samples."""
+    s = getattr(dataset, "running", None)
+    if not ls.identifiable.get("KF") or s is None or not np.size(s.speed):
+        return ""
+    low = np.minimum(np.asarray(s.p_a, float), np.asarray(s.p_b, float))
+    return one_back_pressure_warning(low, ls.values["KF"])
+
+
 def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | None = None,
              mechanisms: Sequence = (), seed: int = 0, progress: bool | None = None,
              dataset=None, frame=None, channels=None) -> Identification:
@@ -111,9 +123,9 @@ def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | N
         ls = fit_cells(dataset, spec, mechanisms=mechanisms, options=options)
     else:
         ls = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=options)
-    note = viscosity_model_warning(frame, dataset, ls)
-    if note:
-        ls.warnings.append(note)
+    for note in (viscosity_model_warning(frame, dataset, ls), torque_gain_warning(dataset, ls)):
+        if note:
+            ls.warnings.append(note)
     post, priors = None, {}
     if bayes and ls.free:
         from motorid.identify.bayes import prior_scale, sample_posterior

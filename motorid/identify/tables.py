@@ -45,7 +45,7 @@ import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
 from motorid import model
-from motorid.identify.identifiability import coverage_reasons, relative_spread
+from motorid.identify.identifiability import coverage_reasons, one_back_pressure_warning, relative_spread
 from motorid.identify.types import FitResult
 from motorid.model import Channels
 
@@ -446,6 +446,11 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
             warnings.append(f"{k}: standard error exceeds the value; the data barely constrain it")
     if not converged:
         warnings.append("the table fit stopped before converging (scipy least_squares, max_nfev)")
+    if "KF" in free:
+        tq = np.isfinite(table.measured["torque"]) & train
+        note = one_back_pressure_warning(np.minimum(table.p_a, table.p_b)[tq], values["KF"])
+        if note:
+            warnings.append(note)
     warnings += list(getattr(table, "notes", []))
     resid = {c: table.measured[c] - pred[c] for c in TABLE_CHANNELS}
     sig = {c: point_sigma(c) for c in TABLE_CHANNELS}
