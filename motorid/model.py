@@ -44,10 +44,12 @@ class OilSpec:
     expansion_per_K: float = 6.5e-4
     temp_C: float | None = None  # oil temperature where an operating-point table gives none [°C]
 
-    def viscosity(self, temperature_C):
-        """Dynamic viscosity μ at ``temperature_C`` [°C] → [Pa·s]."""
+    def viscosity(self, temperature_C, xp=None):
+        """Dynamic viscosity μ at ``temperature_C`` [°C] → [Pa·s] (``xp=numpy`` for a reader's column:
+        no JAX compile per column length)."""
+        kw = {} if xp is None else {"xp": xp}
         return oil.dynamic_viscosity(
-            temperature_C, self.nu40_cSt, self.nu100_cSt, self.density15_kg_m3, self.expansion_per_K
+            temperature_C, self.nu40_cSt, self.nu100_cSt, self.density15_kg_m3, self.expansion_per_K, **kw
         )
 
 

@@ -316,7 +316,7 @@ def _oil_viscosity(spec, temperature_C: np.ndarray) -> np.ndarray:
         raise InputError(f"{where}: need 0 < nu100_cSt < nu40_cSt, got {o.nu100_cSt!r} and {o.nu40_cSt!r}")
     if not (np.isfinite(o.density15_kg_m3) and o.density15_kg_m3 > 0):
         raise InputError(f"{where}: density15_kg_m3 must be > 0, got {o.density15_kg_m3!r}")
-    return np.asarray(spec.oil.viscosity(temperature_C), dtype=float)
+    return np.asarray(spec.oil.viscosity(np.asarray(temperature_C, dtype=float), xp=np), dtype=float)
 
 
 def read_log(path, spec=None, channels=None) -> pd.DataFrame:

@@ -13,38 +13,41 @@ KELVIN = 273.15
 _WALTHER_SHIFT = 0.7  # ASTM D341: Z = ν[cSt] + 0.7
 
 
-def walther_constants(nu40_cSt: float, nu100_cSt: float):
-    """Constants (A, B) of log10 log10(ν+0.7) = A − B log10 T[K] through two points."""
-    t1, t2 = jnp.log10(40.0 + KELVIN), jnp.log10(100.0 + KELVIN)
-    z1 = jnp.log10(jnp.log10(nu40_cSt + _WALTHER_SHIFT))
-    z2 = jnp.log10(jnp.log10(nu100_cSt + _WALTHER_SHIFT))
+def walther_constants(nu40_cSt: float, nu100_cSt: float, xp=jnp):
+    """Constants (A, B) of log10 log10(ν+0.7) = A − B log10 T[K] through two points.
+
+    xp : the array namespace (``jax.numpy``; ``numpy`` where a reader converts a column, whose every
+    new length would otherwise compile each JAX operation anew)."""
+    t1, t2 = xp.log10(40.0 + KELVIN), xp.log10(100.0 + KELVIN)
+    z1 = xp.log10(xp.log10(nu40_cSt + _WALTHER_SHIFT))
+    z2 = xp.log10(xp.log10(nu100_cSt + _WALTHER_SHIFT))
     b = (z1 - z2) / (t2 - t1)
     a = z1 + b * t1
     return a, b
 
 
-def kinematic_viscosity(temperature_C, nu40_cSt: float, nu100_cSt: float):
+def kinematic_viscosity(temperature_C, nu40_cSt: float, nu100_cSt: float, xp=jnp):
     """Kinematic viscosity ν by the Walther relation (ASTM D341) [m²/s].
 
     temperature_C : oil temperature [°C]; nu40_cSt, nu100_cSt : ν at 40 and 100 °C [cSt]
     """
-    a, b = walther_constants(nu40_cSt, nu100_cSt)
-    z = a - b * jnp.log10(jnp.asarray(temperature_C) + KELVIN)
+    a, b = walther_constants(nu40_cSt, nu100_cSt, xp)
+    z = a - b * xp.log10(xp.asarray(temperature_C) + KELVIN)
     nu_cSt = 10.0 ** (10.0**z) - _WALTHER_SHIFT
     return nu_cSt * 1e-6
 
 
-def density(temperature_C, density15: float, expansion_per_K: float = 6.5e-4):
+def density(temperature_C, density15: float, expansion_per_K: float = 6.5e-4, xp=jnp):
     """Oil density ρ(T) = ρ15 / (1 + β (T − 15 °C)) [kg/m³].
 
     density15 : ρ at 15 °C [kg/m³]; expansion_per_K : volumetric expansion β [1/K]
     (about 6.5e-4 /K for mineral oils).
     """
-    return density15 / (1.0 + expansion_per_K * (jnp.asarray(temperature_C) - 15.0))
+    return density15 / (1.0 + expansion_per_K * (xp.asarray(temperature_C) - 15.0))
 
 
-def dynamic_viscosity(temperature_C, nu40_cSt, nu100_cSt, density15, expansion_per_K=6.5e-4):
+def dynamic_viscosity(temperature_C, nu40_cSt, nu100_cSt, density15, expansion_per_K=6.5e-4, xp=jnp):
     """Dynamic viscosity μ = ρ ν [Pa·s]."""
-    return density(temperature_C, density15, expansion_per_K) * kinematic_viscosity(
-        temperature_C, nu40_cSt, nu100_cSt
+    return density(temperature_C, density15, expansion_per_K, xp) * kinematic_viscosity(
+        temperature_C, nu40_cSt, nu100_cSt, xp
     )
