@@ -558,3 +558,42 @@ def test_a_units_row_under_the_header_is_skipped(kind, tmp_path):
     table = read_tables([path], spec, channels=cmap)
     np.testing.assert_allclose(table.measured["torque"], [170.5, 290.25])
     np.testing.assert_allclose(table.speed, np.array([1000, 2000]) * 2 * np.pi / 60)
+
+
+@pytest.mark.parametrize("kind", ["hdf5", "csv"])
+def test_a_time_track_from_the_sample_rate(kind, campaign, tmp_path, monkeypatch):
+    """A DAQ that stores its samples at a fixed rate and no time channel (HDF5 with an 'fs' attribute,
+    a CSV of values): time_s = {sample_rate_Hz = …} gives sample i the time i / rate, whole or in blocks."""
+    import h5py
+
+    from motorid.io import stream
+
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    first = raw["RunNo"] == raw["RunNo"][0]  # one run at its own constant rate
+    raw = {k: v[first] for k, v in raw.items()}
+    rate = 1.0 / float(np.median(np.diff(raw["t"])))
+    rest = {k: v for k, v in raw.items() if k != "t"}
+    if kind == "hdf5":
+        path = tmp_path / "daq.h5"
+        with h5py.File(path, "w") as h5:
+            for k, v in rest.items():
+                h5.create_dataset(k, data=np.asarray(v, float))
+    else:
+        path = tmp_path / "daq.csv"
+        pd.DataFrame(rest).to_csv(path, index=False, float_format="%.17g")
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text().replace('time_s = {name = "t", unit = "s"}',
+                                       f"time_s = {{sample_rate_Hz = {rate!r}}}"))
+    got = read_logs(path, spec, channels=cmap)
+    np.testing.assert_allclose(got["time_s"].to_numpy(), np.arange(len(got)) / rate, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got["time_s"].to_numpy() - got["time_s"].iloc[0], raw["t"] - raw["t"][0], atol=1e-6)
+    if kind == "hdf5":  # the same in blocks
+        monkeypatch.setattr(stream, "FOREIGN_BLOCK_ROWS", 1000)
+        runs = list(stream.stream_runs([path], spec, channels=cmap, progress=False))
+        t = np.concatenate([r.columns["time_s"] for r in runs])
+        np.testing.assert_allclose(np.sort(t), np.arange(len(got)) / rate, atol=1e-9)
+    cmap.write_text(map_text().replace('time_s = {name = "t", unit = "s"}',
+                                       'time_s = {sample_rate_Hz = 100, unit = "s"}'))
+    with pytest.raises(InputError, match="sample_rate_Hz stands alone"):
+        read_logs(path, spec, channels=cmap)

@@ -77,7 +77,7 @@ FORMATS = ("csv", "text", "mat", "hdf5", "parquet", "xlsx", "tdms", "mdf")
 
 _TOP_KEYS = {"file", "convention", "channels", "constants", "absent", "extra", "grid"}
 _FILE_KEYS = {"format", "sheet", "header_row", "skip_rows", "delimiter", "decimal", "group"}
-_CHANNEL_KEYS = {"name", "unit", "sign", "scale", "offset", "absolute", "atmosphere"}
+_CHANNEL_KEYS = {"name", "unit", "sign", "scale", "offset", "absolute", "atmosphere", "sample_rate_Hz"}
 
 
 @dataclass
@@ -91,6 +91,7 @@ class Channel:
     scale: float = 1.0
     offset: float = 0.0
     atmosphere: float = 0.0  # subtracted, in the channel's unit (absolute pressures)
+    rate_Hz: float | None = None  # time_s only: no channel, the time of sample i is i / rate [s]
 
     def convert(self, raw: np.ndarray, pump: bool) -> np.ndarray:
         """Raw channel readings → values in the format column's unit (eq. in the module doc)."""
@@ -142,6 +143,8 @@ class ChannelMap:
         grid = self._grid(source, file_label) if self.grid_axes else None
         read = (lambda name: source.get(name)) if rows is None else (lambda name: source.get(name, *rows))  # noqa: E731
         for col, ch in self.channels.items():
+            if ch.rate_Hz is not None:  # a time track from the sample rate: once the length is known
+                continue
             raw = grid[col] if grid is not None else read(ch.name)
             raw = np.asarray(raw)
             if grid is None and raw.ndim != 1:
@@ -161,6 +164,9 @@ class ChannelMap:
                                                               self.pump)
         if n is None:
             raise InputError(f"{self.path}: [channels] maps no channel")
+        clock = self.channels.get("time_s")
+        if clock is not None and clock.rate_Hz is not None:
+            columns["time_s"] = ((rows[0] if rows else 0) + np.arange(n, dtype=float)) / clock.rate_Hz
         for col, value in self.constants.items():
             columns[col] = np.full(n, value, dtype=object if isinstance(value, str) else float)
         for col in self.absent:
@@ -273,6 +279,14 @@ def _channel(where: str, column: str, spec) -> Channel:
     if not isinstance(spec, dict):
         raise InputError(f"{where}: expected a channel name or a table {{name = ..., unit = ...}}, got {spec!r}")
     _check_keys(where, spec, _CHANNEL_KEYS)
+    if "sample_rate_Hz" in spec:  # a time track the file does not store: sample i at i / rate
+        if column != "time_s" or set(spec) != {"sample_rate_Hz"}:
+            raise InputError(f"{where}: sample_rate_Hz stands alone, for time_s only (time_s = "
+                             "{sample_rate_Hz = 1000.0})")
+        rate = _number(where, spec["sample_rate_Hz"], "sample_rate_Hz")
+        if rate <= 0:
+            raise InputError(f"{where}: sample_rate_Hz must be > 0, got {rate!r}")
+        return Channel(column=column, name="", unit="s", rate_Hz=rate)
     name = spec.get("name")
     if not isinstance(name, str) or not name.strip():
         raise InputError(f"{where}: 'name' (the channel in the file) is required")

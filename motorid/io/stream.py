@@ -235,7 +235,7 @@ def _foreign_plan(path: Path, channels):
     except InputError:
         return None
     try:
-        names = [ch.name for ch in cmap.channels.values()] + list(cmap.extra.values())
+        names = [ch.name for ch in cmap.channels.values() if ch.rate_Hz is None] + list(cmap.extra.values())
         sizes = {source.length(name) for name in names} if hasattr(source, "length") else {None}
     except (InputError, KeyError, ValueError, TypeError):
         sizes = {None}

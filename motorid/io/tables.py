@@ -554,4 +554,5 @@ def _is_table_file(path, cmap=None) -> bool:
         fields = [f.strip() for f in _split_header(Path(path), _head_text(Path(path)))[0]]
     except (OSError, InputError, IndexError):
         return False  # the log reader says what is wrong with it
-    return cmap.channels["time_s"].name.strip() not in fields and is_table(path)
+    clock = cmap.channels["time_s"]
+    return clock.rate_Hz is None and clock.name.strip() not in fields and is_table(path)
