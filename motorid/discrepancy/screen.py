@@ -137,24 +137,24 @@ class Screen:
             prob.cells_version = next(_versions)
         return prob
 
-    def _parameters(self, mechanisms, initial: dict) -> tuple:
+    def _parameters(self, mechanisms, initial: dict, hold=()) -> tuple:
         """(start, free, held, reasons) of the base model plus ``mechanisms`` from ``initial``:
         what the data cannot see is held (``coverage_reasons``, asked once per parameter set;
-        ``reasons`` is a fresh dict, which the solver may add to)."""
+        ``reasons`` is a fresh dict, which the solver may add to), and ``hold`` at ``initial``."""
         names, start = start_values(self.spec, mechanisms, self.options, initial)
         key = tuple(names)
         if key not in self._coverage:
             self._coverage[key] = coverage_reasons(self.dataset, self.spec, names)
         reasons = dict(self._coverage[key])
-        held = {k: start[k] for k in names if k in reasons}
+        held = {k: start[k] for k in names if k in reasons or k in hold}
         return start, [k for k in names if k not in held], held, reasons
 
-    def fit(self, mechanisms, initial: dict, tolerance: float | None = None, weights=None) -> CellFit:
+    def fit(self, mechanisms, initial: dict, tolerance: float | None = None, weights=None, hold=()) -> CellFit:
         """Fit the base model plus ``mechanisms`` on the cells, from ``initial`` (``tolerance``:
         a looser rtol and atol of Levenberg-Marquardt, for screening starts; the compiled
-        program is the same)."""
+        program is the same; ``hold``: parameters kept at ``initial``)."""
         opt = self.options if tolerance is None else replace(self.options, rtol=tolerance, atol=tolerance)
-        start, free, held, reasons = self._parameters(mechanisms, initial)
+        start, free, held, reasons = self._parameters(mechanisms, initial, hold)
         prob = self._problem(mechanisms, free, held, weights)
         values = {k: float(start[k]) for k in free}
         values, _, _, free, _ = solve(prob, values, free, reasons, opt, first=True)
@@ -214,11 +214,12 @@ class Screen:
         """Per channel: which cells (events) belong to ``runs`` (run indices)."""
         return {c: np.isin(self._run[c], runs) for c in self.template.cells[0]}
 
-    def fit_without(self, mechanisms, initial: dict, runs) -> CellFit:
-        """The base model plus ``mechanisms`` fitted on the cells of every run but ``runs``."""
+    def fit_without(self, mechanisms, initial: dict, runs, hold=()) -> CellFit:
+        """The base model plus ``mechanisms`` fitted on the cells of every run but ``runs`` (``hold``:
+        parameters kept at ``initial``)."""
         obs, w = self.template.cells
         out = self._out(runs)
-        return self.fit(mechanisms, initial, weights={c: np.where(out[c], 0.0, w[c]) for c in obs})
+        return self.fit(mechanisms, initial, weights={c: np.where(out[c], 0.0, w[c]) for c in obs}, hold=hold)
 
     def _on_runs(self, fit: CellFit, runs) -> Problem:
         """``fit``'s model and values on the cells of ``runs`` alone."""
