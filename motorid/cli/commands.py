@@ -61,12 +61,39 @@ def main(argv=None) -> int:
         return 130
 
 
+class _PipeSafe:
+    """Standard output that goes quiet once its reader has gone (``motorid fit … | head``): the
+    command still writes its files, and no BrokenPipeError traceback is printed."""
+
+    def __init__(self, stream):
+        self.stream, self.broken = stream, False
+
+    def write(self, text):
+        if not self.broken:
+            try:
+                return self.stream.write(text)
+            except BrokenPipeError:
+                self.broken = True
+        return len(text)
+
+    def flush(self):
+        if not self.broken:
+            try:
+                self.stream.flush()
+            except BrokenPipeError:
+                self.broken = True
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
+
+
 def console() -> None:
     """The ``motorid`` command: :func:`main`, then a prompt exit.
 
     Everything is written and closed by then; ``os._exit`` skips the interpreter's
     teardown of JAX and XLA (a fifth of a second that the user would wait for nothing).
     """
+    sys.stdout = _PipeSafe(sys.stdout)
     rc = main()
     sys.stdout.flush()
     sys.stderr.flush()

@@ -162,3 +162,16 @@ def test_viscosity_from_the_oil_model_is_said_in_the_warnings(tmp_path, small_lo
         assert bool(said) == expect, warnings
         assert ("viscometer" in text) == expect
     assert "100 %" in said[0] and "KL0" in said[0]
+
+
+def test_a_reader_that_goes_away_is_no_error(tmp_path):
+    """`motorid … | head`: the pipe closes before motorid has printed; it printed a BrokenPipeError
+    traceback (and a --report after the summary would not have been written). Now it goes quiet."""
+    p = subprocess.Popen([sys.executable, "-m", "motorid", "fit", str(DEMO / "campaign.csv.gz"), "--motor",
+                          str(MOTOR), "--out", str(tmp_path / "o"), "--quiet", "--report"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=600) == 0, err
+    assert "Traceback" not in err and "BrokenPipe" not in err
+    assert (tmp_path / "o" / "result.json").exists() and (tmp_path / "o" / "report.html").exists()
