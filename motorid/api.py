@@ -214,17 +214,14 @@ def _fit_tables(log_paths, tables, spec, harmonics, mechanisms, channels, motor_
     """The table branch of :func:`fit`: the joint fit, the held-out comparison with the classical
     loss models (10 points or more), result.json as ``motorid fit`` writes it."""
     from motorid.comparators.evaluate import compare
-    from motorid.identify.table_pipeline import identify_tables, table_result_document
+    from motorid.identify.table_pipeline import identify_tables, table_inputs, table_result_document
 
     if bayes:
         raise InputError("bayes is not available with operating-point tables (the least-squares covariance is "
                          "reported)")
     tf = identify_tables(log_paths, tables, spec, mechanisms=mechanisms, harmonics=harmonics, channels=channels)
     comparison = compare(tf.table, spec, mechanisms=mechanisms) if len(tf.table) >= 10 else None
-    inputs = {"logs": [str(Path(p).resolve()) for p in log_paths], "tables": [str(Path(p).resolve()) for p in tables],
-              "motor": motor_input}
-    if channels is not None:
-        inputs["channels"] = str(Path(getattr(channels, "path", channels)).resolve())
+    inputs = table_inputs(log_paths, tables, motor_input, channels)
     return FitResult(table_result_document(tf, spec, inputs, comparison), spec, tf)
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from motorid.errors import InputError
 
 from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
-from motorid.identify.table_pipeline import identify_tables, table_result_document
+from motorid.identify.table_pipeline import identify_tables, table_inputs, table_result_document
 
 
 def run_table_fit(args, logs, tables, spec) -> int:
@@ -31,7 +31,7 @@ def run_table_fit(args, logs, tables, spec) -> int:
     check_output(out, args.force)
     tf = identify_tables(logs, tables, spec, harmonics=args.harmonics, channels=getattr(args, "channels", None))
     comparison = compare(tf.table, spec) if len(tf.table) >= 10 else None
-    inputs = _inputs(logs, tables, args)
+    inputs = table_inputs(logs, tables, str(args.motor), getattr(args, "channels", None))
     doc = table_result_document(tf, spec, inputs, comparison)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / RESULT_FILE)
@@ -87,7 +87,7 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
     dg = diagnose_table(table, spec, min_evidence=args.min_evidence, dataset=dataset, log_fit=log_fit,
                         progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
     doc = diagnosis_table_document(dg, spec)
-    doc["inputs"] = _inputs(logs, tables, args)
+    doc["inputs"] = table_inputs(logs, tables, str(args.motor), getattr(args, "channels", None))
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / "diagnosis.json")
     if not doc["mismatch"]:
@@ -103,13 +103,3 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
     print(f"wrote {out / 'diagnosis.json'}")
     return 0
 
-
-def _inputs(logs, tables, args) -> dict:
-    """result.json's ``inputs``: absolute paths (``motorid report`` re-reads the tables from any
-    folder) and the channel map the files were read through, where one was given."""
-    out = {"logs": [str(Path(p).resolve()) for p in logs], "tables": [str(Path(p).resolve()) for p in tables],
-           "motor": str(args.motor)}
-    channels = getattr(args, "channels", None)
-    if channels is not None:
-        out["channels"] = str(Path(getattr(channels, "path", channels)).resolve())
-    return out

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from motorid.discrepancy.locate import (CHANNEL_WORDS, _bar, _chi2_sf, _fmt, _Labels, _mpas, _quantile_groups,
-                                        _rpm, trend_words)
+from motorid.discrepancy.locate import (CHANNEL_WORDS, _bar, _chi2_sf, _fmt, _group_test, _Labels, _mpas,
+                                        _quantile_groups, _rpm, trend_words)
 from motorid.identify.identifiability import relative_spread
 from motorid.physics.efficiency import operating_mode
 
@@ -27,29 +27,21 @@ CHANNELS = ("torque", "q_a", "q_b", "q_case")
 
 
 def _variables(table) -> dict:
-    """variable → point labels (None where the table does not vary along it)."""
+    """variable → point labels (left out where the table does not vary along it)."""
     w = np.asarray(table.speed, float)
     pa, pb = np.asarray(table.p_a, float), np.asarray(table.p_b, float)
-    out = {
-        "speed": _quantile_groups(np.abs(w), 5, fmt=_rpm),
-        "pressure difference": _quantile_groups(np.abs(pa - pb), 5, fmt=_bar),
-        "port-pressure sum": _quantile_groups(pa + pb, 4, fmt=_bar),
-        "viscosity": _quantile_groups(np.asarray(table.viscosity, float), 4, fmt=_mpas),
-    }
+    out = {}
+    for name, v, n_groups, fmt in (("speed", np.abs(w), 5, _rpm), ("pressure difference", np.abs(pa - pb), 5, _bar),
+                                   ("port-pressure sum", pa + pb, 4, _bar),
+                                   ("viscosity", np.asarray(table.viscosity, float), 4, _mpas)):
+        # a variable held within its scatter (one speed, one temperature) is no variable
+        out[name] = _quantile_groups(v, n_groups, fmt=fmt) if relative_spread(v) >= 0.05 else None
     sign = np.where(w > 0, "positive rotation", np.where(w < 0, "negative rotation", None))
     if len({s for s in sign if s is not None}) == 2:
         out["direction"] = _Labels(sign, ["positive rotation", "negative rotation"])
     mode = operating_mode(w, pa, pb)
     if {"motor", "pump"} <= set(mode):
         out["operating mode"] = _Labels(np.where(mode == "none", None, mode), ["motor", "pump"])
-    # a variable held within its scatter (one speed, one temperature) is no variable: its quantile
-    # groups would share one label and count the same points several times
-    for name, v in (("speed", np.abs(w)), ("pressure difference", np.abs(pa - pb)), ("port-pressure sum", pa + pb),
-                    ("viscosity", np.asarray(table.viscosity, float))):
-        if out[name] is not None and relative_spread(v) < 0.05:
-            out[name] = None
-        elif out[name] is not None:
-            out[name].unique_order = list(dict.fromkeys(out[name].unique_order))
     rec = table.recordings()
     names = list(dict.fromkeys(str(r) for r in rec))
     if len(names) >= 2:
@@ -81,22 +73,16 @@ def table_structures(fit, alpha: float = 1e-3, min_effect: float = 0.3) -> list:
             for var, labels in variables.items():
                 if sense and var == "direction":
                     continue
-                groups, stat = [], 0.0
-                for lab in labels.unique_order:
-                    sel = ok & (labels.values == lab)
-                    n = int(sel.sum())
-                    if n == 0:
-                        continue
-                    zg = float(zs[sel].sum() / np.sqrt(n))
-                    stat += zg * zg
-                    groups.append((lab, float(np.mean(rs[sel])), zg, float(np.median(sig[sel])), n))
-                if len(groups) < 2:
+                stat, dof, tested = _group_test(labels, np.where(ok, zs, np.nan), var)
+                if dof < 2:
                     continue
+                groups = [(lab, float(np.mean(rs[sel & ok])), float(zg), float(np.median(sig[sel & ok])),
+                           int((sel & ok).sum())) for lab, zg, sel in tested]
                 worst = max(groups, key=lambda g: abs(g[2]))
                 verb = "falls short of the model" if worst[1] < 0 else "exceeds the model"
                 at = {"direction": "in", "operating mode": "in", "recording": "in recording"}.get(var, f"at {var}")
-                found.append({"channel": c, "variable": var, "statistic": stat, "dof": len(groups),
-                              "p_value": _chi2_sf(stat, len(groups)), "effect": worst[1],
+                found.append({"channel": c, "variable": var, "statistic": stat, "dof": dof,
+                              "p_value": _chi2_sf(stat, dof), "effect": worst[1],
                               "effect_sigma": abs(worst[1]) / worst[3] if worst[3] > 0 else np.inf,
                               "where": f"{CHANNEL_WORDS[c]}{sense} {at} {worst[0]} {verb} by "
                                        f"{_fmt(abs(worst[1]), c)} on average ({worst[4]} points, "

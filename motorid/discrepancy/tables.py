@@ -124,7 +124,8 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
 
     unexplained = unexplained_table_entries(best_fit, spec)  # on the table's points, logs or not
     model = None
-    if any(u.get("empirical_term") for u in unexplained):  # held out, the empirical term is chosen again on each fold's training points alone
+    # held out, the empirical term is chosen again on each fold's training points alone
+    if any(u.get("empirical_term") for u in unexplained):
         model = MotoridWithTerms(spec, current, label="motorid" + "".join(" + " + m.id for m in current)
                                  + " + empirical term")
     comparison = compare(table, spec, mechanisms=current, motorid_model=model) if len(table) >= 10 else None

@@ -117,6 +117,18 @@ def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict 
     return json_safe(doc)
 
 
+def operating_ranges(speed, dp, viscosity) -> dict:
+    """The operating region a fit saw, [min, max] of |speed| [rad/s], |ΔP| [Pa] and viscosity [Pa·s]
+    over its points or steady samples (``motorid predict`` says where it extrapolates)."""
+    out = {}
+    for name, v in (("speed_rad_s", np.abs(np.asarray(speed, float))), ("dp_Pa", np.abs(np.asarray(dp, float))),
+                    ("viscosity_Pa_s", np.asarray(viscosity, float))):
+        v = v[np.isfinite(v)]
+        if v.size:
+            out[name] = [float(v.min()), float(v.max())]
+    return out
+
+
 def dataset_summary(ds) -> dict:
     runs = []
     if getattr(ds, "runs", None) is not None:
@@ -128,17 +140,11 @@ def dataset_summary(ds) -> dict:
         p["runs"] += 1
         p["samples"] += int(r.get("n_samples", 0) or 0)
         p["steady"] += int(r.get("n_steady", 0) or 0)
-    out_ranges = {}
     s = getattr(ds, "running", None)
-    if s is not None and np.size(s.speed):
-        for name, v in (("speed_rad_s", np.abs(np.asarray(s.speed, float))),
-                        ("dp_Pa", np.abs(np.asarray(s.p_a, float) - np.asarray(s.p_b, float))),
-                        ("viscosity_Pa_s", np.asarray(s.viscosity, float))):
-            v = v[np.isfinite(v)]
-            if v.size:
-                out_ranges[name] = [float(v.min()), float(v.max())]
     return {
-        "ranges": out_ranges,  # the steady running region the fit saw (motorid predict notes points outside)
+        # the steady running region the fit saw (motorid predict notes points outside)
+        "ranges": (operating_ranges(s.speed, np.asarray(s.p_a, float) - np.asarray(s.p_b, float), s.viscosity)
+                   if s is not None and np.size(s.speed) else {}),
         "protocols": by_protocol,
         "runs": runs,
         "events": int(np.asarray(ds.held_torque).size) if getattr(ds, "held_torque", None) is not None else 0,

@@ -35,6 +35,16 @@ def identify_tables(log_paths, table_paths, spec, mechanisms=(), harmonics=None,
     return tf
 
 
+def table_inputs(logs, tables, motor, channels=None) -> dict:
+    """result.json's ``inputs`` of a table fit: absolute paths (``motorid report`` re-reads the tables
+    from any folder), the motor, and the channel map (path or ChannelMap) the files were read through."""
+    out = {"logs": [str(Path(p).resolve()) for p in logs], "tables": [str(Path(p).resolve()) for p in tables],
+           "motor": motor}
+    if channels is not None:
+        out["channels"] = str(Path(getattr(channels, "path", channels)).resolve())
+    return out
+
+
 def table_result_document(tf, spec, inputs: dict, comparison: dict | None = None) -> dict:
     """result.json of a fit with tables: the document of a log fit, plus ``table``, ``comparison``
     and ``motor_spec`` (the spec's TOML, so that ``motorid predict`` needs nothing else)."""

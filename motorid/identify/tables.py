@@ -46,6 +46,7 @@ import numpy as np
 from motorid import _jaxconfig  # noqa: F401
 from motorid import model
 from motorid.identify.identifiability import coverage_reasons, one_back_pressure_warning, relative_spread
+from motorid.identify.results import operating_ranges
 from motorid.identify.types import FitResult
 from motorid.model import Channels
 
@@ -495,17 +496,6 @@ def table_document(tf: TableFit) -> dict:
         "variable_displacement": bool(t.variable_displacement),
         "residual_rms": {c: (float(np.sqrt(np.nanmean(r**2))) if np.isfinite(r).any() else None)
                          for c, r in tf.table_residuals.items()},
-        "ranges": operating_ranges(t),
+        "ranges": operating_ranges(t.speed, t.dp, t.viscosity),
     }
 
-
-def operating_ranges(table) -> dict:
-    """The operating region a table fit saw (``motorid predict`` says where it extrapolates):
-    |speed| [rad/s], |ΔP| [Pa], viscosity [Pa·s] → [min, max]."""
-    out = {}
-    for name, v in (("speed_rad_s", np.abs(table.speed)), ("dp_Pa", np.abs(table.dp)),
-                    ("viscosity_Pa_s", np.asarray(table.viscosity, float))):
-        v = np.asarray(v, float)[np.isfinite(v)]
-        if v.size:
-            out[name] = [float(v.min()), float(v.max())]
-    return out

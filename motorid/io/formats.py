@@ -174,8 +174,8 @@ def read_text_table(path, options: dict | None = None) -> pd.DataFrame:
         skip = int(options.get("skip_rows", 0))  # rows under the header that are no data (a units row)
         if skip:  # dropped, and the data's delimiter and decimal mark sniffed again without them
             lines = text.splitlines()
-            drop = [k for k in range(start, len(lines)) if lines[k].strip()][:skip]
-            text = "\n".join(line for k, line in enumerate(lines) if k not in set(drop))
+            drop = set([k for k in range(start, len(lines)) if lines[k].strip()][:skip])
+            text = "\n".join(line for k, line in enumerate(lines) if k not in drop)
             fields, delim, decimal, start = sniff_text(text, options.get("delimiter"), options.get("decimal"),
                                                        options.get("header_row"))
     except InputError as exc:
