@@ -146,6 +146,7 @@ def test_the_region_check_keeps_a_true_law_that_one_half_cannot_determine():
     assert not any(s["failed"] for s in splits)
 
 
+@pytest.mark.slow  # a minute or more of diagnose: `make test-all` and `make bench`
 def test_a_law_in_no_catalog_is_left_unexplained_with_an_empirical_term_not_a_stand_in():
     """Friction ∝ sgn ω/μ (boundary friction as the oil thins) is in no catalog.  Case-pressure
     friction fits it (the case pressure follows the drain flow, ∝ 1/μ) but does not predict the
@@ -174,6 +175,7 @@ def test_a_law_in_no_catalog_is_left_unexplained_with_an_empirical_term_not_a_st
     assert abs(coef["sgn ω/μ"] + c_true) < 0.1 * c_true, term["formula"]
 
 
+@pytest.mark.slow  # a minute or more of diagnose: `make test-all` and `make bench`
 def test_two_causes_at_once_are_both_named_though_each_alone_fails_the_region_check():
     """A 2 % displacement error with Stribeck friction: with either alone in the model the
     other spoils the region splits, so the first is kept provisionally; asked again with the

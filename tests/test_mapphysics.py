@@ -197,7 +197,8 @@ def test_the_tool_never_sees_the_truth():
         assert "mechanism" not in (ROOT / name / "motor.toml").read_text()
 
 
-@pytest.mark.parametrize("name", CONCEALED)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "filling_loss" else n
+                                  for n in CONCEALED])  # the slowest: `make test-all`, `make bench`
 def test_map_physics_is_found_named_and_recovered(name):
     doc = _diagnose(name)
     truth = tomllib.loads((ROOT / "truths" / f"{name}.toml").read_text())
