@@ -597,3 +597,54 @@ def test_a_time_track_from_the_sample_rate(kind, campaign, tmp_path, monkeypatch
                                        'time_s = {sample_rate_Hz = 100, unit = "s"}'))
     with pytest.raises(InputError, match="sample_rate_Hz stands alone"):
         read_logs(path, spec, channels=cmap)
+
+
+@pytest.mark.parametrize("form", ["zone", "text", "day_first"])
+def test_date_times_with_a_zone_or_as_text_read_as_seconds(form, campaign, tmp_path):
+    """Time-zone-aware stamps (pandas keeps them as objects) were read as raw µs counts, 10⁶ times the
+    run's length, with exit 0; wall-clock text ('2026-03-14 10:22:01.125', or day first with a
+    decimal comma, as a German DAQ export writes it) was refused as not a number."""
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    stamps = pd.Timestamp("2026-03-14 10:22:01", tz="Europe/Berlin") + pd.to_timedelta(raw["t"], unit="s")
+    if form == "zone":
+        path = tmp_path / "bench.parquet"
+        pd.DataFrame(dict(raw, t=stamps)).to_parquet(path)
+    else:
+        text = stamps.strftime("%Y-%m-%d %H:%M:%S.%f" if form == "text" else "%d.%m.%Y %H:%M:%S,%f")
+        path = tmp_path / "bench.txt"
+        pd.DataFrame(dict(raw, t=text)).to_csv(path, index=False, sep=";" if form == "day_first" else ",",
+                                               float_format="%.17g")
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text())
+    got, ref = read_logs(path, spec, channels=cmap), read_logs(csv, spec)
+    np.testing.assert_allclose(np.diff(got["time_s"]), np.diff(ref["time_s"]), atol=2e-6)
+    cmap.write_text(map_text().replace('time_s = {name = "t", unit = "s"}', 'time_s = {name = "t", unit = "ms"}'))
+    with pytest.raises(InputError, match=r"channel 't' \(time_s\) holds (date-times|timestamps)"):
+        read_logs(path, spec, channels=cmap)
+
+
+def test_runs_logged_one_after_another_without_a_run_column_are_told_apart_by_the_time(campaign, tmp_path):
+    """A file that maps no run column was one run: 21 constant-speed set points from 3 to 2500 rpm
+    fitted as one, K_v 38σ off (exit 0).  A pause in the time track (here 5 s) or a time that starts
+    again begins a new run; the runs are those of the file with run numbers."""
+    csv, raw, _ = campaign
+    spec = load_motor_spec(MOTOR)
+    ref = read_logs(csv, spec)
+    run = raw["RunNo"]
+    starts = np.r_[True, run[1:] != run[:-1]]
+    which = np.cumsum(starts) - 1  # each sample's run, 0, 1, …
+    from_zero = raw["t"] - raw["t"][np.flatnonzero(starts)][which]  # each run's clock from 0
+    for t_form in ("pause", "restart"):
+        t = from_zero
+        if t_form == "pause":  # one clock, 5 s between the end of a run and the start of the next
+            ends = np.array([from_zero[which == k].max() for k in range(which[-1] + 1)])
+            t = from_zero + np.r_[0.0, np.cumsum(ends[:-1] + 5.0)][which]
+        path = tmp_path / f"{t_form}.parquet"
+        pd.DataFrame(dict(raw, t=t)).drop(columns=["RunNo"]).to_parquet(path)
+        cmap = tmp_path / "map.toml"
+        cmap.write_text(map_text().replace('run_id = {name = "RunNo"}\n', ""))
+        got = read_logs(path, spec, channels=cmap)
+        assert got["run_id"].nunique() == ref["run_id"].nunique() == np.unique(run).size
+        assert list(pd.factorize(got["run_id"])[0]) == list(pd.factorize(ref["run_id"].astype(str))[0])
+        assert got["run_id"].iloc[0] == t_form and f"{t_form}#2" in set(got["run_id"])

@@ -184,3 +184,41 @@ def test_predict_says_where_it_cannot_or_where_it_extrapolates(made, monkeypatch
     assert "not that of a motor or a pump" in pred.loc["idle", "note"]
     assert pred.loc["inside", "note"] == "" and 0 < pred.loc["inside", "overall_efficiency"] < 1
     assert "extrapolated: |ΔP| 600 bar outside the fitted 50-250 bar" in pred.loc["high", "note"]
+
+
+@pytest.mark.parametrize("edit,words", [
+    (lambda df: df.assign(speed_rpm=df.speed_rpm * 2 * np.pi / 60), r"port A flow is 9.5\d× the swept flow"),
+    (lambda df: df.assign(q_a_lpm=df.q_a_lpm / 3.785411784, q_b_lpm=df.q_b_lpm / 3.785411784),
+     r"port A flow is 0.26\d× the swept flow .*gpm read as L/min"),
+    (lambda df: df.assign(p_a_bar=df.p_a_bar * 14.5038, p_b_bar=df.p_b_bar * 14.5038),
+     r"torque is 0.06\d+× the ideal torque D·ΔP/2π .* psi as bar"),
+    (lambda df: df.assign(torque_Nm=-df.torque_Nm, q_a_lpm=-df.q_a_lpm, q_b_lpm=-df.q_b_lpm),
+     r"port A flow is -1[.0-9]*× the swept flow .* sign convention"),
+])
+def test_a_unit_or_sign_the_ideal_machine_contradicts_is_refused_in_one_line(edit, words, made):
+    """A map in rad/s under speed_rpm, in gpm under _lpm, in psi under _bar, or in pump signs with the
+    motor's speed was fitted with exit 0: K_v 9.5× too high, K_L0 3.8× too low, K_F 100× (a probe's
+    maps, 2026-11-26).  The port flow against D·ω/2π and the torque against D·ΔP/2π refuse them."""
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    df.to_csv(d / "good.csv", index=False)
+    read_tables([d / "good.csv"], spec)  # the map itself passes
+    edit(df).to_csv(d / "bad.csv", index=False)
+    with pytest.raises(InputError, match=r"^bad.csv: " + words):
+        read_tables([d / "bad.csv"], spec)
+    assert len(read_tables([d / "bad.csv"], spec, require_outputs=False)) == len(df)  # predict's points pass
+
+
+def test_a_wrong_displacement_in_the_spec_is_refused_and_a_kf_at_zero_gives_a_readable_warning(made):
+    from motorid.identify.identifiability import one_back_pressure_warning
+    from motorid.io.spec import load_motor_spec
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    df.to_csv(d / "map.csv", index=False)
+    (d / "in3.toml").write_text(MOTOR.replace("displacement_cm3 = 80.0", "displacement_cm3 = 4.88"))
+    with pytest.raises(InputError, match=r"port A flow is 16.\d× the swept flow D·ω/2π of D = 4.88 cm³/rev"):
+        read_tables([d / "map.csv"], load_motor_spec(d / "in3.toml"))
+    words = one_back_pressure_warning(np.full(10, 5e5), 1e-25)
+    assert "more than this fit's whole K_F" in words and "e+" not in words

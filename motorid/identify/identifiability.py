@@ -129,7 +129,8 @@ def one_back_pressure_warning(low_port_pressure, kf) -> str:
     lo, hi = np.percentile(low, [2, 98])
     if hi - lo > ONE_BACK_PRESSURE_PA:
         return ""
-    share = f", {100 * 0.01 / (2 * np.pi) / abs(kf):.0f} % of this fit's K_F" if kf else ""
+    share = 0.01 / (2 * np.pi) / abs(kf) if kf else np.inf
+    share = f", {100 * share:.0f} % of this fit's K_F" if share < 10 else ", more than this fit's whole K_F"
     return (f"every running point has its low-pressure port at one pressure ({np.median(low) / 1e5:.3g} bar): "
             f"K_F cannot be told from a gain error of the torque transducer, which it takes as g/2π (a 1 % "
             f"gain error moves K_F by 0.0016{share}), and its std does not include it; runs at a second back "

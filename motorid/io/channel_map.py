@@ -20,7 +20,9 @@ BENCH_LOG_FORMAT.md "Operating-point tables").
 
 from __future__ import annotations
 
+import datetime
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -77,6 +79,9 @@ FORMATS = ("csv", "text", "mat", "hdf5", "parquet", "xlsx", "tdms", "mdf")
 
 _TOP_KEYS = {"file", "convention", "channels", "constants", "absent", "extra", "grid"}
 _FILE_KEYS = {"format", "sheet", "header_row", "skip_rows", "delimiter", "decimal", "group"}
+#: a file with no run column: a pause of more than this many median time steps starts a new run
+RUN_GAP_STEPS = 20.0
+
 _CHANNEL_KEYS = {"name", "unit", "sign", "scale", "offset", "absolute", "atmosphere", "sample_rate_Hz"}
 
 
@@ -171,7 +176,9 @@ class ChannelMap:
             columns[col] = np.full(n, value, dtype=object if isinstance(value, str) else float)
         for col in self.absent:
             columns[col] = np.full(n, np.nan)
-        if "run_id" not in columns and (self.is_log or "point_id" not in columns):
+        if "run_id" not in columns and self.is_log:
+            columns["run_id"] = self._runs_by_time(_stem(file_label), columns["time_s"], rows)
+        elif "run_id" not in columns and "point_id" not in columns:
             columns["run_id"] = np.full(n, _stem(file_label), dtype=object)
         for out, name in self.extra.items():
             raw = np.asarray(read(name))
@@ -181,6 +188,33 @@ class ChannelMap:
             outputs = [self.output_column(c) for c in TABLE_OUTPUTS if c in self.channels]
             frame = frame[frame[outputs].notna().any(axis=1)].reset_index(drop=True)
         return frame
+
+    def _runs_by_time(self, stem: str, t: np.ndarray, rows) -> np.ndarray:
+        """Run names for a file that maps no run column: a new run wherever the time track starts
+        again (a step ≤ 0) or pauses for more than :data:`RUN_GAP_STEPS` of its median step, as a
+        bench that logs its runs one after another into one file does.  The first run is named
+        after the file, the next ``<file>#2``, …; blocks of a stream (``rows``) carry on from
+        the block before."""
+        t = np.asarray(t, dtype=float)
+        if rows is None or rows[0] == 0:
+            self._run_state = (None, 1, None)
+        last, run, step = self._run_state
+        if t.size == 0:
+            return np.empty(0, dtype=object)
+        dt = np.diff(t, prepend=t[0] if last is None else last)
+        if step is None:
+            positive = dt[dt > 0]
+            step = float(np.median(positive)) if positive.size else None
+        breaks = dt <= 0
+        if last is None:
+            breaks[0] = False
+        if step is not None:
+            breaks |= dt > RUN_GAP_STEPS * step
+        number = run + np.cumsum(breaks)
+        self._run_state = (float(t[-1]), int(number[-1]), step)
+        names = np.array([stem if k == 1 else f"{stem}#{k}" for k in range(1, int(number[-1]) + 1)],
+                         dtype=object)
+        return names[number - 1]
 
     def _grid(self, source, file_label: str) -> dict:
         """Gridded map: axis vectors × matrices → one entry per grid point (row-major, 'ij')."""
@@ -231,12 +265,61 @@ def _numeric(raw: np.ndarray, file_label: str, ch: Channel, offset: int = 0) -> 
                              f"time_s with unit = \"s\" (it is read as seconds)")
         seconds = raw.astype("m8[ns]" if raw.dtype.kind == "m" else "M8[ns]").astype(np.int64) / 1e9
         return np.where(np.isnat(raw), np.nan, seconds)
+    if ch.column == "time_s" and raw.dtype.kind in "OUS":
+        stamps = _timestamps(raw.ravel(), file_label, ch, offset)
+        if stamps is not None:
+            return stamps
     values = pd.to_numeric(pd.Series(raw.ravel()), errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(np.isnan(values) & ~pd.isna(pd.Series(raw.ravel())).to_numpy())
     if bad.size:
         raise InputError(f"{file_label}: channel '{ch.name}' ({ch.column}), sample {offset + bad[0] + 1}: "
                          f"'{raw.ravel()[bad[0]]}' is not a number")
     return values
+
+
+def _timestamps(raw: np.ndarray, file_label: str, ch: Channel, offset: int) -> np.ndarray | None:
+    """A time track of date-times → seconds (since 1970, UTC), or None where it holds numbers.
+
+    Time-zone-aware stamps (pandas keeps them as objects) and wall-clock text ("2026-03-14
+    10:22:01.125", ISO 8601, or day first "14.03.2026 10:22:01,125") are both taken; a zone
+    shifts every stamp alike, so only differences matter.  Text that is a number is left to the
+    numeric path."""
+    series = pd.Series(raw)
+    present = series[series.notna() & (series.astype(str).str.strip() != "")]
+    if present.empty:
+        return None
+    first = present.iloc[0]
+    if isinstance(first, (bytes, np.bytes_)):
+        series = series.map(lambda v: v.decode("utf-8", "replace") if isinstance(v, (bytes, np.bytes_)) else v)
+        present = series[series.notna()]
+        first = present.iloc[0]
+    if isinstance(first, str):
+        if not pd.isna(pd.to_numeric(first.strip().replace(",", "."), errors="coerce")):
+            return None
+        text = series.astype(str).str.strip()
+        day_first = bool(re.match(r"^\d{1,2}\.\d{1,2}\.\d{4}", first.strip()))
+        if day_first:  # 14.03.2026 10:22:01,125: the decimal comma of the seconds → a point
+            text = text.str.replace(r"(\d{2}:\d{2}:\d{2}),(\d+)", r"\1.\2", regex=True)
+        try:
+            stamps = pd.to_datetime(text.where(series.notna()), utc=True, dayfirst=day_first, format="mixed")
+        except (ValueError, TypeError):
+            bad = next((i for i, v in enumerate(text) if pd.isna(pd.to_datetime(v, errors="coerce",
+                                                                                dayfirst=day_first))), 0)
+            raise InputError(f"{file_label}: channel '{ch.name}' (time_s), sample {offset + bad + 1}: "
+                             f"'{raw[bad]}' is neither a number nor a date-time") from None
+    elif isinstance(first, (pd.Timestamp, datetime.datetime, np.datetime64)):
+        try:
+            stamps = pd.to_datetime(series, utc=True)
+        except (ValueError, TypeError) as exc:
+            raise InputError(f"{file_label}: channel '{ch.name}' (time_s): timestamps pandas cannot read "
+                             f"({exc})") from None
+    else:
+        return None
+    if ch.unit != "s":
+        raise InputError(f"{file_label}: channel '{ch.name}' (time_s) holds date-times: map it with "
+                         f"unit = \"s\" (it is read as seconds)")
+    ns = stamps.to_numpy(dtype="datetime64[ns]")
+    return np.where(np.isnat(ns), np.nan, ns.astype(np.int64) / 1e9)
 
 
 # --------------------------------------------------------------------------- loading
