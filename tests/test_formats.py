@@ -648,3 +648,45 @@ def test_runs_logged_one_after_another_without_a_run_column_are_told_apart_by_th
         assert got["run_id"].nunique() == ref["run_id"].nunique() == np.unique(run).size
         assert list(pd.factorize(got["run_id"])[0]) == list(pd.factorize(ref["run_id"].astype(str))[0])
         assert got["run_id"].iloc[0] == t_form and f"{t_form}#2" in set(got["run_id"])
+
+
+def test_a_log_with_no_temperature_takes_the_specs_assumed_one_and_says_so(campaign, tmp_path, capsys):
+    """No oil temperature and no viscosity: every parameter was 'not identifiable' with wrong reasons
+    ('no running-torque samples', notes of 'no steady speed (median nan rad/s)').  With [oil] temp_C in
+    the spec it stands for every sample, and the fit says it was assumed; without, one line."""
+    csv, raw, _ = campaign
+    path = tmp_path / "bench.parquet"
+    pd.DataFrame(raw).drop(columns=["Toil", "mu"]).to_parquet(path)
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text(fmt_lines='absent = ["oil_temp_C", "viscosity_mPas"]')
+                    .replace('oil_temp_C = {name = "Toil", unit = "K"}\n', "")
+                    .replace('viscosity_mPas = {name = "mu", unit = "mPa.s"}\n', ""))
+    spec_text = MOTOR.read_text()
+    assert "temp_C" not in spec_text
+    (tmp_path / "none.toml").write_text(spec_text)
+    (tmp_path / "t40.toml").write_text(spec_text.replace("[oil]", "[oil]\ntemp_C = 40.0"))
+    out = _cli_fails(["fit", str(path), "--channels", str(cmap), "--motor", str(tmp_path / "none.toml"),
+                      "--out", str(tmp_path / "r0")], capsys)
+    assert "no oil temperature and no viscosity in this log" in out and "[oil] temp_C" in out
+    assert main(["fit", str(path), "--channels", str(cmap), "--motor", str(tmp_path / "t40.toml"),
+                 "--out", str(tmp_path / "r1"), "--quiet"]) == 0
+    doc = json.loads((tmp_path / "r1" / "result.json").read_text())
+    assert all(p["identifiable"] for k, p in doc["parameters"].items() if k in ("Kv", "KL0"))
+    assert any("spec's assumed [oil] temp_C = 40 °C" in w for w in doc["fit"]["warnings"])
+
+
+def test_a_log_without_a_needed_input_says_which_not_a_nan_speed(campaign, tmp_path):
+    from motorid.identify.least_squares import fit_least_squares
+    from motorid.identify.pipeline import load_campaign
+
+    csv, raw, _ = campaign
+    path = tmp_path / "bench.parquet"
+    pd.DataFrame(raw).drop(columns=["phi"]).to_parquet(path)
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text(fmt_lines='absent = ["shaft_angle_deg"]')
+                    .replace('shaft_angle_deg = {name = "phi", unit = "rad"}\n', ""))
+    spec = load_motor_spec(MOTOR)
+    _, ds = load_campaign([path], spec, cmap)
+    assert all("none holds a shaft angle" in n for n in ds.notes if n.startswith("run "))
+    ls = fit_least_squares(ds, spec)
+    assert "running runs left out: missing a shaft angle" in ls.reasons["Kv"]

@@ -25,6 +25,19 @@ def _has(arr) -> np.ndarray:
     return np.isfinite(np.asarray(arr, dtype=float))
 
 
+def _why_no_running(data, n_run: int) -> str:
+    """Why running runs gave no steady sample (" (every running run: …)"), or "" where none was logged."""
+    runs = getattr(data, "runs", None)
+    if n_run or runs is None or "excluded" not in getattr(runs, "columns", ()):
+        return ""
+    why = runs.loc[runs["protocol"].astype(str) != "startability", "excluded"].dropna().astype(str)
+    why = why[why != ""]
+    if why.empty:
+        return ""
+    counts = why.value_counts()
+    return " (running runs left out: " + ", ".join(f"{w} ×{n}" for w, n in counts.items()) + ")"
+
+
 def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
     """Reasons why the logs cannot identify a parameter, from what data exist.
 
@@ -39,15 +52,17 @@ def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
     psum = np.asarray(s.p_a + s.p_b) if n_run else np.zeros(0)
     if tq.sum() < 3:
         for k in ("Kv", "KF", "TFc"):
-            reasons[k] = "no running-torque samples in these logs"
+            reasons[k] = "no running-torque samples in these logs" + _why_no_running(data, n_run)
     else:
         mu_w = np.asarray(s.viscosity * s.speed)[tq]
         if relative_spread(np.abs(mu_w)) < 0.05:
             reasons["Kv"] = "running torque at a single speed·viscosity level: viscous and Coulomb friction cannot be told apart"
         if relative_spread(psum[tq]) < 0.05:
-            msg = "running torque at a single port-pressure sum P_A+P_B: K_F and T_Fc cannot be told apart"
-            reasons["KF"] = msg
-            reasons["TFc"] = msg
+            # K_F held at its start, T_Fc fitted: it carries K_F·D·(P_A+P_B) of that one sum, so the
+            # friction torque there stays right and K_v does not take what two held values miss
+            reasons["KF"] = (f"running torque at a single port-pressure sum P_A+P_B "
+                             f"({np.median(psum[tq]) / 1e5:.4g} bar): K_F cannot be told from T_Fc, "
+                             f"so it is held at its start value and T_Fc carries K_F·D·(P_A+P_B) there")
     n_ev = 0 if data.events is None else int(np.asarray(data.held_torque).size)
     good_ev = _has(data.held_torque) if n_ev else np.zeros(0, bool)
     if good_ev.sum() == 0:
@@ -65,7 +80,7 @@ def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
     flows = {c: _has(m[c]) if n_run else np.zeros(0, bool) for c in ("q_a", "q_b", "q_case")}
     case_info = flows["q_case"] | (flows["q_a"] & flows["q_b"])
     if case_info.sum() < 3:
-        reasons["KL0"] = "no case-drain flow (nor both port flows) in these logs"
+        reasons["KL0"] = "no case-drain flow (nor both port flows) in these logs" + _why_no_running(data, n_run)
     else:
         pitch = 2 * np.pi / spec.pistons
         phase = np.mod(np.asarray(s.theta)[case_info], pitch) / pitch
@@ -75,7 +90,7 @@ def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
                 reasons[name] = "case-drain flow not seen over a whole piston pitch of shaft angle (a slow constant-speed run is needed)"
     port = flows["q_a"] | flows["q_b"]
     if port.sum() < 3:
-        reasons["KAB"] = "no port flow in these logs"
+        reasons["KAB"] = "no port flow in these logs" + _why_no_running(data, n_run)
     elif np.all(np.abs(np.asarray(s.p_a - s.p_b)[port]) < 1e3):
         reasons["KAB"] = "port flows only at zero pressure difference"
     if "KL0" in reasons:

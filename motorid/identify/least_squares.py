@@ -29,6 +29,12 @@ from motorid.identify.types import RUNNING_CHANNELS, FitOptions, FitResult
 from motorid.robust import robust_std
 
 
+#: χ²/dof of a channel above which a fit warns that the model misses the logs (a clean fit: 1 ± a few %)
+CHI2_WARN = 4.0
+_WORDS = {"torque": "running torque", "q_a": "port A flow", "q_b": "port B flow", "q_case": "case-drain flow",
+          "breakaway": "breakaway torque"}
+
+
 def start_values(spec, mechanisms, opt: FitOptions, initial: dict | None):
     """Every parameter's name and starting value: the spec's typical sizes, the mechanisms'
     initial values, then ``initial`` → (names, start)."""
@@ -234,6 +240,10 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         steps_total += steps
     if not converged:
         warnings.append("Levenberg-Marquardt stopped at max_steps before converging; raise FitOptions.max_steps")
+    if "KF" in reasons and "TFc" in free and reasons["KF"].startswith("running torque at a single"):
+        warnings.append("T_Fc is the Coulomb friction at the one port-pressure sum of these logs: it holds "
+                        "K_F·D·(P_A+P_B) there (K_F not identifiable, held at its start value); runs at a "
+                        "second pressure tell them apart")
 
     inliers = noise.inliers
     pred = problem.predictions(values)
@@ -242,6 +252,14 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     used = {c: int(np.sum(inliers[c])) for c in obs}
     chi2 = float(sum(np.sum((residuals[c][inliers[c]] / sig[c][inliers[c]]) ** 2) for c in obs))
     dof = max(sum(used.values()) - len(free), 1)
+    per_channel = {c: float(np.sum((residuals[c][inliers[c]] / sig[c][inliers[c]]) ** 2)) / used[c]
+                   for c in obs if used[c] > 10}
+    missed = {c: r for c, r in per_channel.items() if r > CHI2_WARN}
+    if missed:
+        warnings.append("χ²/dof = " + ", ".join(f"{r:.3g} in the {_WORDS.get(c, c)}" for c, r in missed.items())
+                        + ": the model misses these logs far beyond their noise, and the values above carry "
+                        "what it misses (physics the model lacks, a sensor's error, a parameter the logs cannot "
+                        "determine): `motorid diagnose` locates it")
     cov, corr, std, cov_visc, visc_run_var, cov_brk = _uncertainty(problem, values, free, opt, residuals, sig,
                                                                    inliers, chi2, dof)
     all_params = {**{k: float(v) for k, v in problem.held.items()}, **{k: float(v) for k, v in values.items()}}

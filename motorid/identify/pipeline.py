@@ -79,8 +79,17 @@ def viscosity_model_warning(frame, dataset, ls) -> str:
     """A warning where the viscosity of running samples came from the oil model, not a
     viscometer: K_v scales with μ and K_L0, K_AB with 1/μ, one for one, and the
     standard errors do not hold the oil model's own error ("" where it did not)."""
-    from motorid.io.logs import VISCOSITY_FROM_OIL
+    from motorid.io.logs import TEMPERATURE_ASSUMED, VISCOSITY_FROM_OIL
 
+    assumed = ""
+    if frame is not None and TEMPERATURE_ASSUMED in frame.columns and dataset.n_running \
+            and getattr(dataset, "cells", None) is None:
+        flags = frame[TEMPERATURE_ASSUMED].to_numpy(dtype=bool)[dataset.frame_index]
+        if flags.any():
+            t_spec = frame["oil_temp_C"].to_numpy()[dataset.frame_index][flags][0]
+            assumed = (f"; the logs hold no oil temperature for {100 * flags.mean():.0f} % of them, where the "
+                       f"spec's assumed [oil] temp_C = {t_spec:g} °C stands for every sample (a few kelvin off "
+                       f"moves μ by some 10 %)")
     if getattr(dataset, "cells", None) is not None and dataset.n_running:
         share = dataset.cells.viscosity_from_oil / max(float(dataset.cells.n.sum()), 1.0)
     elif frame is None or VISCOSITY_FROM_OIL not in frame.columns or not dataset.n_running:
@@ -93,7 +102,7 @@ def viscosity_model_warning(frame, dataset, ls) -> str:
     return (f"the viscosity of {100 * share:.0f} % of the running samples comes from oil_temp_C and the spec's "
             f"[oil] (Walther, ASTM D341; density ρ15/(1 + β(T − 15 °C))), not a viscometer: "
             f"{', '.join(affected)} carry that model's error one for one (K_v ∝ μ, K_L0 and K_AB ∝ 1/μ), "
-            f"and their std does not include it")
+            f"and their std does not include it{assumed}")
 
 
 def torque_gain_warning(dataset, ls) -> str:

@@ -54,6 +54,11 @@ def steady_state_mask(speed, dp, psum, settings: ExtractSettings = ExtractSettin
     return in_band & ~transient, transient
 
 
+_INPUT_WORDS = {"theta_rad": "a shaft angle", "speed_rad_s": "a speed", "p_a_Pa": "a port A pressure",
+                "p_b_Pa": "a port B pressure", "p_case_Pa": "a case pressure",
+                "viscosity_Pa_s": "an oil temperature or viscosity"}
+
+
 def steady_run(key, cols, settings, excluded, notes):
     """Steady samples of one running run → (their positions in the run or None, direction, why not)."""
     n = cols["time_s"].size
@@ -64,8 +69,13 @@ def steady_run(key, cols, settings, excluded, notes):
     valid = np.all([np.isfinite(cols[c]) for c in INPUT_CHANNELS], axis=0)
     excluded[MISSING_INPUT] = excluded.get(MISSING_INPUT, 0) + int((~valid).sum())
     speed = cols["speed_rad_s"]
+    if not valid.any():
+        lacking = [_INPUT_WORDS.get(c, c) for c in INPUT_CHANNELS if not np.isfinite(cols[c]).any()]
+        notes.append(f"run {key}: no sample holds every input the model needs"
+                     + (f" (none holds {', '.join(lacking)})" if lacking else ""))
+        return None, 0.0, "missing " + (", ".join(lacking) if lacking else "inputs")
     median_speed = nanmedian(speed[valid])
-    if not valid.any() or not abs(median_speed) >= settings.rest_speed:
+    if not abs(median_speed) >= settings.rest_speed:
         excluded[NO_STEADY_SPEED] = excluded.get(NO_STEADY_SPEED, 0) + int(valid.sum())
         notes.append(f"run {key}: no steady speed (median {median_speed:.3g} rad/s, "
                      f"below {settings.rest_speed:g} rad/s)")

@@ -25,6 +25,20 @@ from motorid.units import (M3_PER_US_GALLON, M3S_PER_LPM, NM_PER_LBF_FT, PA_PER_
                            RAD_S_PER_RPM)
 
 VISCOSITY_FROM_OIL = "viscosity_from_oil_model"  # frame column: True where μ came from oil_temp_C and the spec
+TEMPERATURE_ASSUMED = "oil_temp_assumed"  # frame column: True where the spec's [oil] temp_C stood for the log's
+
+
+def assumed_temperature(temp, mu, oil, where: str):
+    """A log (or a block of one) that holds neither an oil temperature nor a viscosity takes the spec's
+    [oil] temp_C for every sample → (temperatures [°C], assumed: bool); one line where the spec has none."""
+    temp = np.asarray(temp, dtype=float)
+    if temp.size == 0 or not (np.isnan(temp).all() and np.isnan(np.asarray(mu, dtype=float)).all()):
+        return temp, False
+    t_spec = getattr(oil, "temp_C", None) if oil is not None else None
+    if t_spec is None:
+        raise InputError(f"{where}: no oil temperature and no viscosity in this log: map oil_temp_C or a "
+                         f"viscosity, or give [oil] temp_C in the motor spec to assume one")
+    return np.full(temp.size, float(t_spec)), True
 PROTOCOLS = ("constant_speed", "constant_pressure", "startability", "constant_flow", "constant_torque")
 
 # printf formats that keep more digits than any bench sensor resolves
@@ -423,6 +437,10 @@ def read_log(path, spec=None, channels=None) -> pd.DataFrame:
 
     mu = out["viscosity_Pa_s"].to_numpy()
     oil = getattr(spec, "oil", None)
+    temp, assumed = assumed_temperature(temp, mu if kinematic is None else np.full(len(out), np.nan), oil,
+                                        str(path)) if kinematic is None else (temp, False)
+    if assumed:
+        out["oil_temp_C"] = temp
     if kinematic is not None:
         name, nu = kinematic
         if oil is None:
@@ -441,6 +459,7 @@ def read_log(path, spec=None, channels=None) -> pd.DataFrame:
             mu = np.where(gaps, _oil_viscosity(spec, np.where(gaps, temp, 40.0)), mu)
     out["viscosity_Pa_s"] = mu
     out[VISCOSITY_FROM_OIL] = gaps  # rows whose viscosity the oil model gave, not a viscometer
+    out[TEMPERATURE_ASSUMED] = np.full(len(out), assumed)
 
     out["file"] = _constant_categorical(str(path), len(out))
     out["run"] = out["run_id"]

@@ -347,6 +347,14 @@ def _to_si(state: _FileState, block: dict) -> tuple[dict, np.ndarray, np.ndarray
     theta = np.mod(out["theta_rad"], two_pi)
     out["theta_rad"] = np.where(theta >= two_pi, 0.0, theta)
     mu = out["viscosity_Pa_s"]
+    assumed = False
+    if kinematic is None:
+        try:
+            temp, assumed = logs.assumed_temperature(temp, mu, state.oil, str(state.path))
+        except InputError:
+            raise _Invalid("no oil temperature, no viscosity and no [oil] temp_C") from None
+        if assumed:
+            out["oil_temp_C"] = temp
     if kinematic is not None:
         if state.oil is None:
             raise _Invalid("kinematic viscosity without an [oil] density")
@@ -363,6 +371,7 @@ def _to_si(state: _FileState, block: dict) -> tuple[dict, np.ndarray, np.ndarray
             mu = np.where(gaps, logs._oil_viscosity(state.spec, np.where(gaps, temp, 40.0)), mu)
     out["viscosity_Pa_s"] = mu
     out[logs.VISCOSITY_FROM_OIL] = gaps
+    out[logs.TEMPERATURE_ASSUMED] = np.full(gaps.size, assumed)
     return out, run, proto
 
 
