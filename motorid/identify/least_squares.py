@@ -22,6 +22,7 @@ import numpy as np
 from motorid import model
 from motorid.identify.covariance import breakaway_sandwich, covariance_from_normal, viscosity_covariance
 from motorid.identify.identifiability import coverage_reasons
+from motorid.identify.noise import CORRELATED_TAU, correlation_times
 from motorid.identify.noise import breakaway_noise, floor_noise, initial_noise, residual_noise, spikiness
 from motorid.identify.problem import Problem
 from motorid.identify.solver import backend_for, gauss_newton_start, solve
@@ -170,6 +171,30 @@ def _uncertainty(problem: Problem, values: dict, free: list, opt: FitOptions, re
     return cov, corr, std, cov_visc, visc_run_var, cov_brk
 
 
+def _correlated_noise(problem: Problem, noise, residuals, sig, inliers, run_of, warnings) -> dict:
+    """Widen the cells' weights by the residuals' correlation time where the noise is not white.
+
+    Each channel with τ > :data:`~motorid.identify.noise.CORRELATED_TAU` (per-sample residuals
+    only: a campaign reduced to cells as it was read keeps none) has its run noise levels times √τ
+    in the problem's cells, so the covariance and the sampler count n/τ independent readings per
+    run; a warning names the channel.  χ², the noise levels and the fixed noise diagnose gives its
+    candidates stay per sample.  → channel → τ."""
+    if problem.row_counts is not None or not problem.has_running:
+        return {}
+    taus = {c: t for c, t in correlation_times(residuals, sig, inliers, run_of).items() if t > CORRELATED_TAU}
+    if not taus:
+        return {}
+    # the problem's weights only (covariance, sampler); the noise levels, χ² and what diagnose compares
+    # with them stay those of single samples
+    problem.set_cells(noise.inliers, {c: (v * np.sqrt(taus[c]) if c in taus else v) for c, v in noise.runs.items()},
+                      noise.breakaway)
+    warnings.append("the residuals are correlated in time (" + ", ".join(
+        f"{_WORDS.get(c, c)}: τ = {t:.3g} samples" for c, t in taus.items()) + "), as band-limited noise or a "
+        "sample rate above the sensors' bandwidth gives: each run holds about n/τ independent readings, and "
+        "the standard errors are widened by √τ")
+    return taus
+
+
 def _reported(names, free, fixed, values, std, reasons, start, mechanisms, warnings):
     """Value, standard error and identifiability of every parameter (None where not
     identifiable), with a warning for each fitted one at its bound or barely constrained."""
@@ -260,6 +285,9 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
                         + ": the model misses these logs far beyond their noise, and the values above carry "
                         "what it misses (physics the model lacks, a sensor's error, a parameter the logs cannot "
                         "determine): `motorid diagnose` locates it")
+    # fits with the noise held (diagnose's comparisons of candidates) keep per-sample weights
+    taus = {} if opt.fixed_noise is not None else _correlated_noise(problem, noise, residuals, sig, inliers,
+                                                                      run_of, warnings)
     cov, corr, std, cov_visc, visc_run_var, cov_brk = _uncertainty(problem, values, free, opt, residuals, sig,
                                                                    inliers, chi2, dof)
     all_params = {**{k: float(v) for k, v in problem.held.items()}, **{k: float(v) for k, v in values.items()}}
@@ -271,5 +299,5 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         used=used, chi2=chi2, dof=dof, steps=steps_total, converged=bool(converged), warnings=warnings,
         residuals=residuals, sigma=sig, inliers=inliers, params_all=all_params, mechanisms=tuple(mechanisms),
         problem=problem, covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var,
-        breakaway_noise_shape=noise.gamma, covariance_breakaway=cov_brk,
+        breakaway_noise_shape=noise.gamma, covariance_breakaway=cov_brk, noise_correlation=taus,
     )

@@ -137,3 +137,47 @@ def floor_noise(sig_runs: np.ndarray, measured: np.ndarray) -> np.ndarray:
     out = np.where(np.isfinite(sig_runs) & (sig_runs > 0), sig_runs, pooled)
     # a run's σ may not fall below a tenth of the pooled level (a short run's MAD is noisy)
     return np.maximum(out, max(0.1 * pooled, floor))
+
+
+#: integrated autocorrelation time of a channel's residuals above which its standard errors are
+#: widened: white noise gives 1 (the estimate's own scatter on a campaign is a few %)
+CORRELATED_TAU = 1.2
+#: the longest lag summed [samples]; the sum stops earlier at the first ρ_k below RHO_STOP
+MAX_LAG, RHO_STOP = 200, 0.05
+
+
+def correlation_times(residuals: dict, sigma: dict, inliers: dict, run_of: np.ndarray) -> dict:
+    """Integrated autocorrelation time τ = 1 + 2 Σ ρ_k [samples] of each running channel's
+    normalized residuals, pooled over runs (channel → τ).
+
+    The fit weighs n samples of a run as n independent readings; where the noise is band-limited
+    (a sensor's filter, a DAQ sampling above the sensor's bandwidth, a log interpolated to a finer
+    rate) neighbouring residuals move together and a run holds about n/τ independent ones: the
+    standard errors then need √τ.  ρ_k is pooled over every run's consecutive inlier samples
+    (Σ e_t e_{t+k} / Σ e_t²), and the sum stops at the first ρ_k below :data:`RHO_STOP`
+    (Sokal's window, made safe for white noise: a true τ of 1 stays 1)."""
+    run_of = np.asarray(run_of)
+    out = {}
+    for c, r in residuals.items():
+        if c == "breakaway" or c not in sigma or c not in inliers:
+            continue
+        ok = np.asarray(inliers[c], bool) & np.isfinite(r)
+        if ok.sum() < 100:
+            continue
+        z = np.where(ok, np.asarray(r, float) / np.asarray(sigma[c], float), 0.0)
+        # run means out: a run's offset is the model's to answer for, not the noise's correlation
+        counts = np.bincount(run_of, weights=ok.astype(float))
+        means = np.bincount(run_of, weights=z) / np.maximum(counts, 1.0)
+        z = np.where(ok, z - means[run_of], 0.0)
+        denom = float(np.dot(z, z))
+        if denom <= 0:
+            continue
+        tau = 1.0
+        for k in range(1, min(MAX_LAG, z.size - 1) + 1):
+            both = (run_of[:-k] == run_of[k:]) & ok[:-k] & ok[k:]  # a run's samples are contiguous
+            rho = float(np.dot(z[:-k][both], z[k:][both])) / denom
+            if rho < RHO_STOP:
+                break
+            tau += 2.0 * rho
+        out[c] = tau
+    return out

@@ -94,6 +94,7 @@ def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict 
             "chi2": ls.chi2, "dof": ls.dof, "reduced_chi2": ls.reduced_chi2, "steps": ls.steps,
             "converged": ls.converged, "warnings": list(ls.warnings),
             "outliers": ls.outliers, "used": ls.used, "seconds": seconds,
+            "noise_correlation_samples": dict(getattr(ls, "noise_correlation", {}) or {}),
             "mechanisms": [m.id for m in ls.mechanisms],
         },
         "correlation": {"names": list(ls.free), "matrix": ls.correlation},

@@ -306,6 +306,9 @@ class FitResult:
     # the share of `covariance` added where the breakaway events scatter more than their
     # variance model says (:func:`breakaway_sandwich`; over `free`, None where nothing was added)
     covariance_breakaway: np.ndarray | None = None
+    # channel -> integrated autocorrelation time of its residuals [samples], where above
+    # noise.CORRELATED_TAU and the covariance was widened by it
+    noise_correlation: dict = field(default_factory=dict)
 
     @property
     def reduced_chi2(self) -> float:
