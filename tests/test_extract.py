@@ -248,3 +248,23 @@ def test_spikes_in_input_readings_leave_their_samples_out():
                                atol=0.05)
 
 
+
+
+@pytest.mark.parametrize("rpm", [1330.0, 1350.0, 2500.0])
+def test_an_angle_aliased_by_a_low_sample_rate_agrees_with_its_speed(rpm):
+    """At 20 Hz a shaft at 1330 rpm turns 7.0 rad between samples, read as 0.72 rad: the rate check
+    took the ratio 0.10 for a speed in rad/s read as rpm and refused a good log.  The steps are the
+    speed's own, wrapped: the units agree.  A real unit mistake is still seen at a rate that follows."""
+    from types import SimpleNamespace
+
+    from motorid.identify.extract import _angle_against_speed
+
+    rng = np.random.default_rng(2)
+    w = rpm * 2 * np.pi / 60
+    for rate, factor, expected in ((20.0, 1.0, 1.0), (2000.0, 1.0, 1.0), (2000.0, 60 / (2 * np.pi), 2 * np.pi / 60)):
+        t = np.arange(200) / rate
+        cols = {"time_s": t, "theta_rad": np.mod(w * t + 0.3, 2 * np.pi),
+                "speed_rad_s": w * factor * (1 + 1e-4 * rng.standard_normal(t.size))}
+        g = SimpleNamespace(angle_ratios=[])
+        _angle_against_speed(g, "run", cols, np.arange(t.size))
+        assert len(g.angle_ratios) == 1 and abs(g.angle_ratios[0][1] - expected) < 0.02 * expected, (rate, g)

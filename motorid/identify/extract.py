@@ -188,6 +188,14 @@ def _angle_against_speed(g: _Gathered, key, cols, chosen) -> None:
     step = np.angle(np.exp(1j * (th[b] - th[a])))
     moving = np.abs(step) > 0
     speed = float(np.nanmedian(w[idx]))
+    # a speed that turns the shaft more than π/2 between samples aliases the angle: where the wrapped
+    # steps are the speed's own steps wrapped, the units agree (20 Hz at 1330 rpm steps 7.0 rad, read
+    # as 0.72: a ratio of 0.10 that looked like a speed in rad/s read as rpm)
+    wrapped = np.angle(np.exp(1j * (step - w[a] * dt)))
+    if (np.nanmedian(np.abs(w[a] * dt)) > np.pi / 2 and np.isfinite(wrapped).all()
+            and np.median(np.abs(wrapped)) < 0.1):
+        g.angle_ratios.append((key, 1.0))
+        return
     # an angle that follows: the steps it does take well below π/2 (an aliased step would wrap), and
     # half a revolution turned in all
     if (abs(speed) < 0.05 or moving.sum() < 10 or np.quantile(np.abs(step[moving]), 0.9) > np.pi / 2
