@@ -446,9 +446,11 @@ def read_log(path, spec=None, channels=None) -> pd.DataFrame:
         if oil is None:
             raise InputError(f"{path}: column '{name}' is a kinematic viscosity; a motor spec with an [oil] "
                              f"table is needed for the density")
-        from motorid.physics.oil import density
+        from motorid.physics.oil import density, temperature_of_viscosity
 
-        mu = nu * np.asarray(density(temp, oil.density15_kg_m3, oil.expansion_per_K), dtype=float)
+        t_rho = np.where(np.isfinite(temp), temp,  # no temperature: the one at which the oil has this ν
+                         temperature_of_viscosity(nu / 1e-6, oil.nu40_cSt, oil.nu100_cSt, xp=np))
+        mu = nu * density(t_rho, oil.density15_kg_m3, oil.expansion_per_K, xp=np)
     gaps = np.isnan(mu)
     if gaps.any():
         if oil is None:

@@ -37,6 +37,15 @@ def kinematic_viscosity(temperature_C, nu40_cSt: float, nu100_cSt: float, xp=jnp
     return nu_cSt * 1e-6
 
 
+def temperature_of_viscosity(nu_cSt, nu40_cSt: float, nu100_cSt: float, xp=jnp):
+    """The oil temperature [°C] at which the Walther relation gives the kinematic viscosity ν [cSt]
+    (its inverse: log10 T = (A − log10 log10(ν + 0.7))/B): what a kinematic reading without a
+    temperature says about the density to convert it with."""
+    a, b = walther_constants(nu40_cSt, nu100_cSt, xp)
+    z = xp.log10(xp.log10(xp.asarray(nu_cSt) + _WALTHER_SHIFT))
+    return 10.0 ** ((a - z) / b) - KELVIN
+
+
 def density(temperature_C, density15: float, expansion_per_K: float = 6.5e-4, xp=jnp):
     """Oil density ρ(T) = ρ15 / (1 + β (T − 15 °C)) [kg/m³].
 
