@@ -242,3 +242,20 @@ def test_a_kinematic_viscosity_without_a_temperature_converts_at_its_own_tempera
     df.assign(viscosity_cSt=nu_pt).to_csv(d / "without_t.csv", index=False)
     a, b = read_table(d / "with_t.csv", spec), read_table(d / "without_t.csv", spec)
     np.testing.assert_allclose(b.viscosity, a.viscosity, rtol=1e-12)
+
+
+def test_a_decimal_comma_export_with_thousands_points_reads_as_the_plain_csv(made):
+    """'1.002,5' (a German Excel export): the thousands point left the column text, and the table was
+    refused ('498,0000' is not a number, on the first row, which has none)."""
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    cols = ["speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm", "q_a_lpm"]
+    de = lambda x: f"{x:,.4f}".replace(",", "_").replace(".", ",").replace("_", ".")  # noqa: E731
+    lines = [";".join(cols)] + [";".join(de(v) for v in row) for row in df[cols].to_numpy()]
+    assert any("." in line for line in lines[1:])  # some speeds above 999
+    (d / "de.csv").write_text("\n".join(lines) + "\n")
+    df[cols].to_csv(d / "plain.csv", index=False)
+    a, b = read_tables([d / "plain.csv"], spec), read_tables([d / "de.csv"], spec)
+    np.testing.assert_allclose(b.speed, a.speed, rtol=1e-6)
+    np.testing.assert_allclose(b.measured["q_a"], a.measured["q_a"], rtol=1e-4, atol=1e-9)

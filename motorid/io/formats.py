@@ -185,6 +185,7 @@ def read_text_table(path, options: dict | None = None) -> pd.DataFrame:
     try:
         frame = pd.read_csv(io.StringIO(body), sep=delim if delim is not None else r"\s+", header=None,
                             names=names, decimal=decimal, engine="c",
+                            thousands="." if decimal == "," else None,  # 1.002,5: a decimal comma's thousands
                             skipinitialspace=True, comment=None, skip_blank_lines=True, index_col=False)
     except (ValueError, pd.errors.ParserError) as exc:
         raise InputError(f"{path}: cannot parse as delimited text ({str(exc).splitlines()[0]})") from None
