@@ -690,3 +690,27 @@ def test_a_log_without_a_needed_input_says_which_not_a_nan_speed(campaign, tmp_p
     assert all("none holds a shaft angle" in n for n in ds.notes if n.startswith("run "))
     ls = fit_least_squares(ds, spec)
     assert "running runs left out: missing a shaft angle" in ls.reasons["Kv"]
+
+
+def test_a_folder_of_daq_files_each_with_its_own_map_is_read_as_the_files(campaign, tmp_path):
+    """A folder of .tdms files, each with <stem>.channels.toml beside it: 'directory holds no .csv or
+    .csv.gz file', though the same files listed one by one fitted."""
+    from motorid.io.tables import split_logs_and_tables
+
+    _, raw, _ = campaign
+    folder = tmp_path / "bench7"
+    folder.mkdir()
+    run = raw["RunNo"]
+    for r in np.unique(run)[:3]:
+        part = {k: v[run == r] for k, v in raw.items()}
+        path, text = write_foreign("tdms", part, folder)
+        stem = f"run_{int(r):03d}"
+        path.rename(folder / f"{stem}.tdms")
+        (folder / f"{stem}.channels.toml").write_text(text)
+    logs, tables = split_logs_and_tables([folder])
+    assert [p.name for p in logs] == ["run_001.tdms", "run_002.tdms", "run_003.tdms"] and tables == []
+    frame = read_logs(logs, load_motor_spec(MOTOR))
+    assert frame["run_id"].nunique() == 3
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match=r"directory holds no file motorid reads \(.csv, .csv.gz, or a DAQ"):
+        split_logs_and_tables([tmp_path / "empty"])

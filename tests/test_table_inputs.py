@@ -259,3 +259,18 @@ def test_a_decimal_comma_export_with_thousands_points_reads_as_the_plain_csv(mad
     a, b = read_tables([d / "plain.csv"], spec), read_tables([d / "de.csv"], spec)
     np.testing.assert_allclose(b.speed, a.speed, rtol=1e-6)
     np.testing.assert_allclose(b.measured["q_a"], a.measured["q_a"], rtol=1e-4, atol=1e-9)
+
+
+def test_a_units_row_is_named_as_such_in_the_refusal(made):
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    cols = ["speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm"]
+    text = df[cols].to_csv(index=False).splitlines()
+    (d / "units.csv").write_text("\n".join([text[0], "[rpm],bar,bar,Nm"] + text[1:]) + "\n")
+    with pytest.raises(InputError, match=r"line 2: '\[rpm\]' is not a number \(a units row under the header\? "
+                                         r"a channel map with \[file\] skip_rows = 1"):
+        read_tables([d / "units.csv"], spec)
+    (d / "bad.csv").write_text("\n".join(text[:3] + ["300,x,0,1"] + text[3:]) + "\n")
+    with pytest.raises(InputError, match=r"line 4: 'x' is not a number$"):
+        read_tables([d / "bad.csv"], spec)

@@ -272,8 +272,11 @@ def _numeric(raw: np.ndarray, file_label: str, ch: Channel, offset: int = 0) -> 
     values = pd.to_numeric(pd.Series(raw.ravel()), errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(np.isnan(values) & ~pd.isna(pd.Series(raw.ravel())).to_numpy())
     if bad.size:
+        value = str(raw.ravel()[bad[0]]).strip()
+        hint = (" (a units row under the header? [file] skip_rows = 1 leaves it out)"
+                if offset + bad[0] == 0 and re.fullmatch(r"[\[(]?[^\d\s]+[\])]?", value) else "")
         raise InputError(f"{file_label}: channel '{ch.name}' ({ch.column}), sample {offset + bad[0] + 1}: "
-                         f"'{raw.ravel()[bad[0]]}' is not a number")
+                         f"'{raw.ravel()[bad[0]]}' is not a number{hint}")
     return values
 
 

@@ -301,8 +301,10 @@ def _parse_body(path: Path, body: str, delim: str, fields: list, found: dict, he
         bad = np.flatnonzero(values.isna().to_numpy() & ~cells.isin(_NA_STRINGS).to_numpy())
         if bad.size:
             i = int(bad[0])
+            hint = (" (a units row under the header? a channel map with [file] skip_rows = 1 leaves it out: "
+                    "docs/formats.md)" if i == 0 and re.fullmatch(r"[\[(]?[^\d\s]+[\])]?", cells.iloc[i]) else "")
             raise InputError(f"{path}: column '{fields[j]}', line {header_line + 1 + i}: "
-                             f"'{cells.iloc[i]}' is not a number")
+                             f"'{cells.iloc[i]}' is not a number{hint}")
     raise InputError(f"{path}: cannot parse as CSV")  # pragma: no cover
 
 

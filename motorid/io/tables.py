@@ -567,12 +567,13 @@ def split_logs_and_tables(paths, channels=None) -> tuple[list, list]:
         if p.is_dir():
             found = sorted(q for q in p.iterdir() if q.is_file() and
                            (q.name.endswith(".csv") or q.name.endswith(".csv.gz")))
-            if not found and (p / "channels.toml").is_file():  # a folder of mapped DAQ files
+            if not found:  # a folder of DAQ files, under one channels.toml or a <stem>.channels.toml each
                 from motorid.io.formats import data_files_in
 
                 found = data_files_in(p)
             if not found:
-                raise InputError(f"{p}: directory holds no .csv or .csv.gz file")
+                raise InputError(f"{p}: directory holds no file motorid reads (.csv, .csv.gz, or a DAQ file: "
+                                 f".tdms, .mf4, .mat, .h5, .parquet, .xlsx)")
             files += found
         elif not p.exists():
             raise InputError(f"{p}: no such file")
