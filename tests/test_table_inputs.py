@@ -274,3 +274,31 @@ def test_a_units_row_is_named_as_such_in_the_refusal(made):
     (d / "bad.csv").write_text("\n".join(text[:3] + ["300,x,0,1"] + text[3:]) + "\n")
     with pytest.raises(InputError, match=r"line 4: 'x' is not a number$"):
         read_tables([d / "bad.csv"], spec)
+
+
+def test_a_data_sheet_of_efficiencies_gives_back_the_torque_and_the_high_pressure_flow(made):
+    """Makers publish η_v and η_hm (in %) more often than torque and flow: such a sheet was refused
+    ('no output column').  The ISO 4409 definitions, inverted per mode, give back the torque and the
+    flow into the high-pressure port of every point, in all four quadrants."""
+    from motorid.io.tables import read_tables
+    from motorid.physics.efficiency import efficiencies
+
+    d, spec, df = made
+    df.to_csv(d / "map.csv", index=False)
+    ref = read_tables([d / "map.csv"], spec)
+    eta_v, eta_hm, eta = efficiencies(ref.measured["torque"], ref.measured["q_a"], ref.measured["q_b"], ref.speed,
+                                      ref.p_a, ref.p_b, ref.displacement)
+    sheet = df[["speed_rpm", "p_a_bar", "p_b_bar"]].assign(vol_eff_pct=100 * eta_v, eta_t_pct=100 * eta)
+    sheet.to_csv(d / "sheet.csv", index=False)
+    got = read_tables([d / "sheet.csv"], spec)
+    hp_a = ref.dp >= 0
+    power = ref.dp * ref.speed != 0
+    assert np.isin(["motor", "pump"], np.where(ref.dp * ref.speed > 0, "motor", "pump")).all()
+    np.testing.assert_allclose(got.measured["torque"][power], ref.measured["torque"][power], rtol=1e-9)
+    np.testing.assert_allclose(got.measured["q_a"][power & hp_a], ref.measured["q_a"][power & hp_a], rtol=1e-9)
+    np.testing.assert_allclose(got.measured["q_b"][power & ~hp_a], ref.measured["q_b"][power & ~hp_a], rtol=1e-9)
+    assert np.isnan(got.measured["q_case"]).all() and np.isnan(got.measured["q_b"][hp_a]).all()
+    assert any("derived from the volumetric, overall efficiency" in n for n in got.notes)
+    sheet[["speed_rpm", "p_a_bar", "p_b_bar", "eta_t_pct"]].to_csv(d / "overall.csv", index=False)
+    with pytest.raises(InputError, match=r"an overall efficiency alone cannot be split"):
+        read_tables([d / "overall.csv"], spec)

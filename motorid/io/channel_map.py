@@ -44,6 +44,7 @@ _DISPLACEMENT = {"cm3": 1.0, "cm3_rev": 1.0, "cc": 1.0, "cc_rev": 1.0, "ml": 1.0
                  "in3": _IN3 * 1e6, "in3_rev": _IN3 * 1e6, "m3": 1e6, "m3_rev": 1e6, "m3_rad": 2e6 * math.pi,
                  "l": 1e3, "l_rev": 1e3}
 _NONE = {"": 1.0, "1": 1.0, "count": 1.0}
+_EFFICIENCY = {"": 1.0, "1": 1.0, "fraction": 1.0, "%": 0.01, "pct": 0.01, "percent": 0.01}
 _ABSOLUTE_UNITS = ("psia", "bara", "bar_a")
 _GAUGE_UNITS = ("psig", "barg", "bar_g")
 
@@ -59,6 +60,7 @@ _FAMILIES = {
     "viscosity": (_VISCOSITY_UNITS, 1e-3),
     "displacement": (_DISPLACEMENT, 1.0),
     "count": (_NONE, 1.0),
+    "efficiency": (_EFFICIENCY, 1.0),
 }
 
 # every column a map may fill: format column → family ("text" for names)
@@ -70,10 +72,14 @@ COLUMNS = {
     "oil_temp_C": "temperature", "viscosity_mPas": "viscosity", "displacement_cm3": "displacement",
     "n_samples": "count", "torque_std_Nm": "torque", "speed_std_rpm": "speed",
     "q_a_std_lpm": "flow", "q_b_std_lpm": "flow", "q_case_std_lpm": "flow",
+    # a data sheet's efficiencies (a fraction in the table; io/efficiency_columns.py derives torque and flow)
+    "volumetric_efficiency": "efficiency", "hydromechanical_efficiency": "efficiency",
+    "overall_efficiency": "efficiency",
 }
 LOG_REQUIRED = ("time_s", "run_id", "protocol", "shaft_angle_deg", "speed_rpm", "torque_Nm", "p_a_bar",
                 "p_b_bar", "p_case_bar", "q_a_lpm", "q_b_lpm", "q_case_lpm", "oil_temp_C")
 TABLE_OUTPUTS = ("torque_Nm", "q_a_lpm", "q_b_lpm", "q_case_lpm")
+EFFICIENCY_OUTPUTS = ("volumetric_efficiency", "hydromechanical_efficiency", "overall_efficiency")
 PUMP_SIGN = ("torque_Nm", "q_a_lpm", "q_b_lpm")  # negated by convention = "pump"
 FORMATS = ("csv", "text", "mat", "hdf5", "parquet", "xlsx", "tdms", "mdf")
 
@@ -185,7 +191,7 @@ class ChannelMap:
             columns[out] = np.squeeze(raw) if raw.ndim > 1 else raw
         frame = pd.DataFrame(columns)
         if grid is not None:  # cells where the map holds no measurement
-            outputs = [self.output_column(c) for c in TABLE_OUTPUTS if c in self.channels]
+            outputs = [self.output_column(c) for c in TABLE_OUTPUTS + EFFICIENCY_OUTPUTS if c in self.channels]
             frame = frame[frame[outputs].notna().any(axis=1)].reset_index(drop=True)
         return frame
 
@@ -532,9 +538,9 @@ def _check_complete(cmap: ChannelMap):
     if missing:
         raise InputError(f"{cmap.path}: [channels] {missing[0]}: missing (an operating-point table needs "
                          f"speed_rpm and p_a_bar, p_b_bar or dp_bar; with no time_s the map is a table)")
-    if not any(c in cmap.channels for c in TABLE_OUTPUTS):
+    if not any(c in cmap.channels for c in TABLE_OUTPUTS + EFFICIENCY_OUTPUTS):
         raise InputError(f"{cmap.path}: [channels]: an operating-point table needs one output "
-                         f"({', '.join(TABLE_OUTPUTS)})")
+                         f"({', '.join(TABLE_OUTPUTS)}, or efficiencies: {', '.join(EFFICIENCY_OUTPUTS)})")
 
 
 def load_channel_map(path) -> ChannelMap:

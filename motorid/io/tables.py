@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from motorid.errors import InputError
+from motorid.io.efficiency_columns import HEADERS as EFFICIENCY_HEADERS, outputs_from_efficiencies
 from motorid.io.logs import (_BY_SI, _HEADERS, _NA_STRINGS, _PRESSURE_UNITS, _oil_viscosity, _parse_body,
                           _read_text, _split_header, _unit_hint, normalize_header)
 
@@ -187,6 +188,9 @@ def _map_table_columns(path: Path, fields: list):
             put("recording", j, None, name)
         elif norm in _DP_HEADERS:
             put("dp_Pa", j, _DP_HEADERS[norm], name)
+        elif norm in EFFICIENCY_HEADERS:  # a data sheet's efficiencies: torque and flow derived from them
+            key, scale = EFFICIENCY_HEADERS[norm]
+            put("eff:" + key, j, scale, name)
         elif norm.startswith("displacement_") and norm[len("displacement_"):] in _DISPLACEMENT_UNITS:
             put("displacement_m3", j, norm[len("displacement_"):], name)
         elif "_std_" in norm and norm.replace("_std_", "_", 1) in _HEADERS:
@@ -240,9 +244,10 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
         raise InputError(f"{path}: no such file")
     fields, delim, body, header_line = _header_fields(path)
     found = _map_table_columns(path, fields)
-    if require_outputs and not any(k in found for k in OUTPUTS):
+    if require_outputs and not any(k in found for k in OUTPUTS) and not any(k.startswith("eff:") for k in found):
         raise InputError(f"{path}: no output column: a table for a fit needs at least one of torque_Nm, q_a_lpm, "
-                         f"q_b_lpm, q_case_lpm")
+                         f"q_b_lpm, q_case_lpm (or efficiencies: volumetric_efficiency, "
+                         f"hydromechanical_efficiency, overall_efficiency, fractions or _pct)")
     parse_keys = {k: v for k, v in found.items() if k not in ("point_id", "recording")}
     if "point_id" in found:
         parse_keys["run_id"] = found["point_id"]
@@ -385,6 +390,20 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
         ids = np.array([f"{path.name}:{k}" for k in lines], dtype=object)
         has_id = False
     notes = []
+    effs = {k[4:]: column(k)[0] * found[k][1] for k in found if k.startswith("eff:")}
+    if effs:
+        if "t" in effs and len(effs) == 1:
+            raise InputError(f"{path}: column '{fields[found['eff:t'][0]]}': an overall efficiency alone cannot "
+                             f"be split into torque and flow; give the volumetric or the hydromechanical one too")
+        derived, words = outputs_from_efficiencies(effs, speed, p_a, p_b, displacement)
+        used = False
+        for c, x in derived.items():
+            fill = ~np.isfinite(measured[c]) & np.isfinite(x)
+            if fill.any():
+                measured[c] = np.where(fill, x, measured[c])
+                used = True
+        if used:
+            notes += [f"{path.name}: {w}" for w in words]
     stall = np.isfinite(measured["torque"]) & (np.abs(speed) < STALL_SPEED)
     if stall.any():  # a held shaft's torque is anywhere within its static friction: no running law
         measured["torque"] = np.where(stall, np.nan, measured["torque"])
