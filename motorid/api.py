@@ -164,7 +164,7 @@ class FitResult:
 
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
-        if self.identification is not None and self.identification.bayes is not None:
+        if getattr(self.identification, "bayes", None) is not None:  # a table fit has none
             write_chain(self.identification.bayes, out / CHAIN_FILE)
         return self.to_json(out / RESULT_FILE)
 

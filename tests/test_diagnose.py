@@ -96,6 +96,15 @@ def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys):
     assert set(how.values()) <= {"fit on the cells, polished on every sample", "fit on every sample",
                                  "fit on the cells", "linear update"}
     assert list(how.values()).count("linear update") >= len(how) - 4
+    # result.json beside it: the fit with what diagnose named, which predict, report and export take
+    # ('predict DIR' on a diagnose folder was 'no such file')
+    res = json.loads((tmp_path / "result.json").read_text())
+    assert res["fit"]["mechanisms"] == ["torque_offset"] and "result.json (the fit with torque_offset" in out
+    t0 = res["parameters"]["torque_offset.T0"]
+    assert abs(t0["value"] - m["parameters"]["torque_offset.T0"]["value"]) < 0.1 * t0["std"]
+    points = tmp_path / "points.csv"
+    points.write_text("point_id,speed_rpm,p_a_bar,p_b_bar,oil_temp_C\nP1,1000,150,5,50\n")
+    assert main(["predict", str(tmp_path), str(points), "--out", str(tmp_path / "pred.csv")]) == 0
     rc = main(["diagnose", str(ROOT / name / "campaign.csv.gz"), "--motor", str(ROOT / name / "motor.toml"),
                "--out", str(tmp_path)])
     assert rc == 2 and "--force" in capsys.readouterr().err
@@ -107,6 +116,9 @@ def test_report_tells_the_diagnosis_with_residual_plots(tmp_path, capsys):
     assert main(["fit", log, "--motor", motor, "--out", str(tmp_path)]) == 0
     assert main(["diagnose", log, "--motor", motor, "--out", str(tmp_path)]) == 0
     assert main(["report", str(tmp_path)]) == 0
+    # the fit's result.json is kept; diagnose's refit goes beside it
+    assert json.loads((tmp_path / "result.json").read_text())["fit"]["mechanisms"] == []
+    assert json.loads((tmp_path / "diagnosed" / "result.json").read_text())["fit"]["mechanisms"] == ["torque_offset"]
     page = (tmp_path / "report.html").read_text()
     assert "torque_offset" in page and "Residuals before and after" in page
     section = page[page.index('id="discrepancy"'):]

@@ -714,3 +714,16 @@ def test_a_folder_of_daq_files_each_with_its_own_map_is_read_as_the_files(campai
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError, match=r"directory holds no file motorid reads \(.csv, .csv.gz, or a DAQ"):
         split_logs_and_tables([tmp_path / "empty"])
+
+
+def test_run_numbers_that_start_again_for_each_protocol_are_runs_of_their_protocol(tmp_path):
+    """Run 1 of the constant-speed test and run 1 of the startability test in one log were refused
+    ("run '1' has several protocols"): a run is now its protocol and its number."""
+    df = pd.read_csv(DEMO / "campaign.csv.gz")
+    ref = read_logs(DEMO / "campaign.csv.gz", load_motor_spec(MOTOR))
+    per_protocol = df.groupby("protocol", sort=False)["run_id"].transform(lambda r: pd.factorize(r)[0] + 1)
+    df.assign(run_id=per_protocol).to_csv(tmp_path / "renumbered.csv", index=False, float_format="%.17g")
+    got = read_logs(tmp_path / "renumbered.csv", load_motor_spec(MOTOR))
+    assert got["run_id"].nunique() == ref["run_id"].nunique() > df["protocol"].nunique()
+    assert set(got["run_id"].astype(str)) >= {"constant_speed:1", "startability:1"}
+    np.testing.assert_array_equal(pd.factorize(got["run_id"])[0], pd.factorize(ref["run_id"])[0])

@@ -120,6 +120,17 @@ def test_diagnose_names_the_unrecorded_temperatures_and_nothing_else(concealed):
         want = _delta_t(spec.oil, 45.0, logs[label] - mean)
         assert abs(d["value"] - want) < 3 * d["std"], (label, d, want)
     assert dts["day2"]["value"] - dts["day3"]["value"] == pytest.approx(7.0, abs=0.5)
+    # the result.json diagnose writes beside diagnosis.json: predict takes it, without the recordings' hook
+    from motorid.cli.tables import diagnosed_result_document
+
+    res = diagnosed_result_document(dg, spec, {})
+    assert res["fit"]["mechanisms"] == [] and any("describes the table's recordings" in w
+                                                  for w in res["fit"]["warnings"])
+    from motorid.identify.predict import predict_points
+    from motorid.physics.registry import get
+
+    pred = predict_points((res, spec, tuple(get(m) for m in res["fit"]["mechanisms"])), table)
+    assert np.isfinite(pred["torque_Nm"]).all()
     assert "day2" in doc["mechanisms"][0]["description"]
     # held out, the model that knows the recordings predicts better than the one that does not
     models = doc["comparison"]["models"]

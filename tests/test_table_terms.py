@@ -102,6 +102,12 @@ def test_diagnose_command_reports_the_term_unexplained(tmp_path, capsys):
     rows = doc["comparison"]["models"]
     ours = next(k for k in rows if k.startswith("motorid"))
     assert ours.endswith("empirical term"), list(rows)
+    # result.json beside diagnosis.json (the table's own fit and comparison): predict takes the folder
+    res = json.loads((out / "result.json").read_text())
+    assert res["fit"]["mechanisms"] == [] and res["parameters"]["KF"]["identifiable"]
+    points = tmp_path / "points.csv"
+    points.write_text("point_id,speed_rpm,p_a_bar,p_b_bar\nP1,1000,150,0\n")
+    assert main(["predict", str(out), str(points), "--out", str(tmp_path / "pred.csv")]) == 0
 
 
 def test_a_joint_diagnosis_of_logs_and_table_reports_the_tables_term(tmp_path):

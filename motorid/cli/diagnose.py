@@ -43,4 +43,44 @@ def run(args) -> int:
     result.save(out)
     print(result)
     print(f"wrote {out / DIAGNOSIS_FILE}")
+    write_refit(out, args, spec, [m["id"] for m in result.document.get("mechanisms", [])])
     return 0
+
+
+def write_refit(out: Path, args, spec, mechanisms: list) -> None:
+    """result.json beside diagnosis.json: the fit of the same data with the mechanisms diagnose named, so
+    that `motorid predict`, `report` and `export` take the diagnosed model (a fit, as `motorid fit` writes
+    it; an empirical term of an unexplained entry is not in it)."""
+    from motorid import api
+    from motorid.io.results import RESULT_FILE
+    from motorid.physics.registry import CATALOG
+
+    # a table's own hook (a viscosity per recording) is no model of the motor: the refit leaves it out
+    kept = [m for m in mechanisms if m in CATALOG]
+    refit = api.fit(args.logs, spec, mechanisms=kept, motor_path=args.motor, channels=args.channels)
+    refit.document["fit"]["from_diagnose"] = True
+    target = refit_folder(out)
+    refit.save(target)
+    with_what = ("with " + ", ".join(kept)) if kept else "the 1992 model alone: no catalog mechanism was named"
+    left = [m for m in mechanisms if m not in CATALOG]
+    print(f"wrote {target / RESULT_FILE} (the fit {with_what}"
+          + (f"; {', '.join(left)} describes the recordings, not the motor, and is left out" if left else "")
+          + "; predict, report and export take it)")
+
+
+def refit_folder(out: Path) -> Path:
+    """Where diagnose writes its refit's result.json: ``out``, unless a result.json of `motorid fit` is
+    there already (fit and diagnose into one folder, then `motorid report` on both): then ``out/diagnosed``."""
+    import json
+
+    from motorid.io.results import RESULT_FILE
+
+    existing = out / RESULT_FILE
+    if existing.exists():
+        try:
+            ours = json.loads(existing.read_text()).get("fit", {}).get("from_diagnose", False)
+        except (ValueError, OSError):
+            ours = False
+        if not ours:
+            return out / "diagnosed"
+    return out

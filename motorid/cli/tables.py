@@ -64,6 +64,24 @@ def format_comparison(comparison: dict) -> str:
 # ----------------------------------------------------------------------------- diagnose
 
 
+def diagnosed_result_document(dg: dict, spec, inputs: dict) -> dict:
+    """result.json of a table diagnosis: its final fit and held-out comparison, for predict, report and
+    export.  A viscosity per recording describes the recordings, not the motor: a new point is predicted
+    at the recordings' mean viscosity, which is the model without it (physics/recording_temperature.py),
+    so it is left out of ``fit.mechanisms`` with a warning."""
+    from motorid.physics.registry import CATALOG
+
+    result = table_result_document(dg["fit"], spec, inputs, dg["comparison"])
+    result["fit"]["from_diagnose"] = True
+    left = [m for m in result["fit"].get("mechanisms", []) if m not in CATALOG]
+    if left:
+        result["fit"]["mechanisms"] = [m for m in result["fit"]["mechanisms"] if m in CATALOG]
+        result["fit"].setdefault("warnings", []).append(
+            f"{', '.join(left)} (diagnose) describes the table's recordings, not the motor: its parameters are "
+            f"fitted here, and a new point is predicted without it, at the recordings' mean viscosity")
+    return result
+
+
 def run_table_diagnose(args, logs, tables, spec) -> int:
     """The `motorid diagnose` command when tables are given (with logs: the joint fit's BIC)."""
     import sys
@@ -101,5 +119,16 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
     if doc["comparison"]:
         print(format_comparison(doc["comparison"]))
     print(f"wrote {out / 'diagnosis.json'}")
+    # result.json: the fit with what diagnose kept (its own fit and held-out comparison), for predict,
+    # report and export
+    from motorid.cli.diagnose import refit_folder
+
+    result = diagnosed_result_document(dg, spec, doc["inputs"])
+    target = refit_folder(out)
+    target.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(result, target / "result.json")
+    kept = result["fit"]["mechanisms"]
+    print(f"wrote {target / 'result.json'} (the fit " + (f"with {', '.join(kept)}" if kept else "of the 1992 model alone")
+          + "; predict, report and export take it)")
     return 0
 

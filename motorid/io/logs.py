@@ -384,9 +384,13 @@ def read_log(path, spec=None, channels=None) -> pd.DataFrame:
     pairs = pairs.drop_duplicates()
     mixed = pairs["run"][pairs["run"].duplicated()]
     if len(mixed):
-        r = mixed.iloc[0]
-        names = sorted(set(proto_norm[proto_codes[run_codes == r]]))
-        raise InputError(f"{path}: run '{run_values[r]}' has several protocols: {', '.join(names)}")
+        # run numbers that start again for each protocol (run 1 of the constant-speed test, run 1 of the
+        # startability test): a run is its protocol and its number, '<protocol>:<run>'
+        key = proto_codes.astype(np.int64) * len(run_values) + run_codes
+        codes, uniq = pd.factorize(key)
+        run_values = np.array([f"{proto_norm[k // len(run_values)]}:{run_values[k % len(run_values)]}"
+                               for k in uniq], dtype=object)
+        run_codes = codes
     # text columns as categoricals: one string per distinct value, not per row
     out = pd.DataFrame({"run_id": _categorical(run_values, run_codes),
                         "protocol": _categorical(proto_norm, proto_codes)})
