@@ -302,3 +302,41 @@ def test_a_data_sheet_of_efficiencies_gives_back_the_torque_and_the_high_pressur
     sheet[["speed_rpm", "p_a_bar", "p_b_bar", "eta_t_pct"]].to_csv(d / "overall.csv", index=False)
     with pytest.raises(InputError, match=r"an overall efficiency alone cannot be split"):
         read_tables([d / "overall.csv"], spec)
+
+
+def test_predict_says_where_a_point_lies_in_a_quadrant_the_fit_never_saw(made, monkeypatch):
+    """A motor-mode map predicted in pump mode or in reverse said nothing (a probe's points): the
+    quadrants the fit saw are in result.json (ranges.quadrants), and a point outside them is noted."""
+    import json
+
+    from motorid.cli import main
+    from motorid.identify.predict import predict_points
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    df[(df.speed_rpm > 0) & (df.p_a_bar > df.p_b_bar)].to_csv(d / "motor_only.csv", index=False)
+    monkeypatch.chdir(d)
+    assert main(["fit", "motor_only.csv", "--motor", "motor.toml", "--out", "fit", "--quiet"]) == 0
+    assert json.loads((d / "fit" / "result.json").read_text())["table"]["ranges"]["quadrants"] == ["motor, forward"]
+    pd.DataFrame({"point_id": ["inside", "pump", "reverse"], "speed_rpm": [1000.0, -1000.0, -1000.0],
+                  "p_a_bar": [150.0, 150.0, 0.0], "p_b_bar": [0.0, 0.0, 150.0]}).to_csv(d / "pts.csv", index=False)
+    pred = predict_points(d / "fit", read_tables([d / "pts.csv"], spec, require_outputs=False)).set_index("point_id")
+    assert pred.loc["inside", "note"] == ""
+    assert "pump, reverse, a quadrant the fit never saw (it saw motor, forward)" in pred.loc["pump", "note"]
+    assert "motor, reverse, a quadrant the fit never saw" in pred.loc["reverse", "note"]
+
+
+def test_a_row_without_any_output_reading_is_set_aside_not_counted(made):
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    cols = ["speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm", "q_a_lpm"]
+    holes = df[cols].copy()
+    holes.loc[holes.index[[3, 7]], ["torque_Nm", "q_a_lpm"]] = np.nan
+    holes.to_csv(d / "holes.csv", index=False)
+    got = read_tables([d / "holes.csv"], spec)
+    assert len(got) == len(df) - 2 and any("2 row(s) with no output reading (line 5 first)" in n for n in got.notes)
+    assert len(read_tables([d / "holes.csv"], spec, require_outputs=False)) == len(df)  # predict's points
+    holes.assign(torque_Nm=np.nan, q_a_lpm=np.nan).to_csv(d / "none.csv", index=False)
+    with pytest.raises(InputError, match=r"none.csv: no row holds an output reading"):
+        read_tables([d / "none.csv"], spec)

@@ -204,13 +204,22 @@ def _outside(doc: dict, table) -> dict:
               "dp_Pa": (np.abs(np.asarray(table.dp, float)), "|ΔP|", 1e-5, "bar"),
               "viscosity_Pa_s": (np.asarray(table.viscosity, float), "viscosity", 1e3, "mPa·s")}
     out: dict = {}
-    for key, (lo, hi) in ranges.items():
+    for key, bounds in ranges.items():
         if key not in values:
             continue
+        lo, hi = bounds
         v, words, f, unit = values[key]
         slack = 0.02 * max(hi - lo, abs(hi))  # one level (one speed, one viscosity): 2 % of it
         for i in np.flatnonzero((v < lo - slack) | (v > hi + slack)):
             part = f"{words} {v[i] * f:.4g} {unit} outside the fitted {lo * f:.4g}-{hi * f:.4g} {unit}"
+            out[int(i)] = (out[int(i)] + ", " if int(i) in out else "extrapolated: ") + part
+    seen = ranges.get("quadrants")
+    if seen:  # a quadrant no fitted point was in: pump-mode or reverse-rotation losses were never seen
+        from motorid.identify.results import quadrants
+
+        where = quadrants(table.speed, table.dp)
+        for i in np.flatnonzero((where != "") & ~np.isin(where, seen)):
+            part = f"{where[i]}, a quadrant the fit never saw (it saw {'; '.join(seen)})"
             out[int(i)] = (out[int(i)] + ", " if int(i) in out else "extrapolated: ") + part
     return out
 

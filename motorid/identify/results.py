@@ -127,7 +127,23 @@ def operating_ranges(speed, dp, viscosity) -> dict:
         v = v[np.isfinite(v)]
         if v.size:
             out[name] = [float(v.min()), float(v.max())]
+    seen = quadrants(speed, dp)
+    out["quadrants"] = sorted(set(seen[seen != ""].tolist()))
     return out
+
+
+#: |ΔP| [Pa] and |ω| [rad/s] below which a point has no quadrant (no power flows through it)
+QUADRANT_DP, QUADRANT_SPEED = 1e5, 1e-3
+
+
+def quadrants(speed, dp) -> np.ndarray:
+    """Each point's quadrant: "motor, forward", "pump, reverse", … ("" where |ΔP| < 1 bar or at rest);
+    forward is the direction flow into port A drives, motor the mode where ΔP·ω > 0."""
+    w, p = np.asarray(speed, float), np.asarray(dp, float)
+    mode = np.where(w * p > 0, "motor", "pump")
+    way = np.where(w > 0, "forward", "reverse")
+    label = np.char.add(np.char.add(mode, ", "), way).astype(object)
+    return np.where((np.abs(p) >= QUADRANT_DP) & (np.abs(w) >= QUADRANT_SPEED), label, "")
 
 
 def dataset_summary(ds) -> dict:

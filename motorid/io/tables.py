@@ -419,9 +419,17 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
     if "recording" in found:
         # an empty cell: a point of no named recording (never given a recording's own viscosity)
         recording = table[found["recording"][0]].fillna("").astype(str).str.strip().to_numpy(dtype=object)
-    return PointTable(ids, speed, p_a, p_b, p_case, temperature, mu, displacement, measured, rel,
-                      np.array([str(path)] * n, dtype=object), lines, has_id, how, variable, recording, assumed,
-                      notes)
+    table = PointTable(ids, speed, p_a, p_b, p_case, temperature, mu, displacement, measured, rel,
+                       np.array([str(path)] * n, dtype=object), lines, has_id, how, variable, recording, assumed,
+                       notes)
+    empty = ~np.any([np.isfinite(measured[c]) for c in measured], axis=0)
+    if require_outputs and empty.all():
+        raise InputError(f"{path}: no row holds an output reading (torque, a flow, or an efficiency)")
+    if require_outputs and empty.any():  # a point with no reading: nothing to fit, not a point of the map
+        table = table.subset(~empty)
+        table.notes.append(f"{path.name}: {int(empty.sum())} row(s) with no output reading (line "
+                           f"{lines[empty][0]} first) set aside")
+    return table
 
 
 def concat_tables(tables: list) -> PointTable:
