@@ -105,6 +105,20 @@ def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys):
     points = tmp_path / "points.csv"
     points.write_text("point_id,speed_rpm,p_a_bar,p_b_bar,oil_temp_C\nP1,1000,150,5,50\n")
     assert main(["predict", str(tmp_path), str(points), "--out", str(tmp_path / "pred.csv")]) == 0
+    # the motor's torque, not the transducer's reading: the zero offset is the bench's (as in the exports)
+    import numpy as np
+
+    from motorid.model import predict as model_predict
+    from motorid.model import make_samples
+
+    spec = load_motor_spec(ROOT / name / "motor.toml")
+    params = {k: e["value"] for k, e in res["parameters"].items() if e.get("value") is not None}
+    w = 1000 * 2 * np.pi / 60
+    theta = np.linspace(0, 2 * np.pi, 721)[:-1]
+    mu = float(spec.oil.viscosity(50.0))
+    motor = float(np.mean(model_predict(params, spec, make_samples(spec, theta, w, 150e5, 5e5, 0.0, mu)).torque))
+    got = float(np.genfromtxt(tmp_path / "pred.csv", delimiter=",", names=True)["torque_Nm"])
+    assert abs(got - motor) < 0.05 * abs(t0["value"]), (got, motor, t0["value"])
     rc = main(["diagnose", str(ROOT / name / "campaign.csv.gz"), "--motor", str(ROOT / name / "motor.toml"),
                "--out", str(tmp_path)])
     assert rc == 2 and "--force" in capsys.readouterr().err

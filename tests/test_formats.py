@@ -727,3 +727,40 @@ def test_run_numbers_that_start_again_for_each_protocol_are_runs_of_their_protoc
     assert got["run_id"].nunique() == ref["run_id"].nunique() > df["protocol"].nunique()
     assert set(got["run_id"].astype(str)) >= {"constant_speed:1", "startability:1"}
     np.testing.assert_array_equal(pd.factorize(got["run_id"])[0], pd.factorize(ref["run_id"])[0])
+
+
+def test_mdf_channel_groups_at_different_rates_are_read_on_the_time_tracks_instants(campaign, tmp_path):
+    """A recorder writes each rate as its own channel group (pressures fast, speed slower, temperature
+    at 1/100 of the rate): 'has N samples but … resample them to one time base' and no way to map it.
+    Each channel is taken at the time track's instants from its own time stamps."""
+    from asammdf import MDF, Signal
+
+    _, raw, _ = campaign
+    run = raw["RunNo"]
+    one = {k: v[run == run[0]] for k, v in raw.items()}
+    t = one["t"] - one["t"][0]
+    path = tmp_path / "multirate.mf4"
+    mdf = MDF(version="4.10")
+    fast = [k for k in one if k not in ("t", "n_Motor", "Toil")]
+    mdf.append([Signal(one[k], t, name=k) for k in fast])
+    mdf.append([Signal(one["n_Motor"][::4], t[::4], name="n_Motor")])
+    mdf.append([Signal(one["Toil"][::50], t[::50], name="Toil")])
+    mdf.save(path, overwrite=True)
+    mdf.close()
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text("", time_name="pA_abs@time"))
+    spec = load_motor_spec(MOTOR)
+    got = read_logs(path, spec, channels=cmap)
+    pd.DataFrame(one).to_parquet(tmp_path / "whole.parquet")
+    ref = read_logs(tmp_path / "whole.parquet", spec, channels=_whole_map(tmp_path))
+    assert len(got) == len(ref) == t.size
+    np.testing.assert_allclose(got["p_a_Pa"], ref["p_a_Pa"], rtol=1e-12)
+    speed_err = np.abs(got["speed_rad_s"].to_numpy() - ref["speed_rad_s"].to_numpy())
+    assert np.median(speed_err) < 0.01 * np.abs(ref["speed_rad_s"]).median() + 1e-9  # interpolated
+    assert np.abs(got["oil_temp_C"] - ref["oil_temp_C"]).max() < 1.0
+
+
+def _whole_map(folder):
+    path = folder / "whole.toml"
+    path.write_text(map_text())
+    return path

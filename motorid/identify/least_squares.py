@@ -22,7 +22,7 @@ import numpy as np
 from motorid import model
 from motorid.identify.covariance import breakaway_sandwich, covariance_from_normal, viscosity_covariance
 from motorid.identify.identifiability import coverage_reasons
-from motorid.identify.noise import CORRELATED_TAU, correlation_times
+from motorid.identify.noise import correlation_threshold, correlation_times
 from motorid.identify.noise import breakaway_noise, floor_noise, initial_noise, residual_noise, spikiness
 from motorid.identify.problem import Problem
 from motorid.identify.solver import backend_for, gauss_newton_start, solve
@@ -174,14 +174,15 @@ def _uncertainty(problem: Problem, values: dict, free: list, opt: FitOptions, re
 def _correlated_noise(problem: Problem, noise, residuals, sig, inliers, run_of, warnings) -> dict:
     """Widen the cells' weights by the residuals' correlation time where the noise is not white.
 
-    Each channel with τ > :data:`~motorid.identify.noise.CORRELATED_TAU` (per-sample residuals
+    Each channel with τ above :func:`~motorid.identify.noise.correlation_threshold` (per-sample residuals
     only: a campaign reduced to cells as it was read keeps none) has its run noise levels times √τ
     in the problem's cells, so the covariance and the sampler count n/τ independent readings per
     run; a warning names the channel.  χ², the noise levels and the fixed noise diagnose gives its
     candidates stay per sample.  → channel → τ."""
     if problem.row_counts is not None or not problem.has_running:
         return {}
-    taus = {c: t for c, t in correlation_times(residuals, sig, inliers, run_of).items() if t > CORRELATED_TAU}
+    taus = {c: t for c, (t, n) in correlation_times(residuals, sig, inliers, run_of).items()
+            if t > correlation_threshold(n)}
     if not taus:
         return {}
     # the problem's weights only (covariance, sampler); the noise levels, χ² and what diagnose compares

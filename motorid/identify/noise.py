@@ -140,24 +140,36 @@ def floor_noise(sig_runs: np.ndarray, measured: np.ndarray) -> np.ndarray:
 
 
 #: integrated autocorrelation time of a channel's residuals above which its standard errors are
-#: widened: white noise gives 1 (the estimate's own scatter on a campaign is a few %)
+#: widened: white noise gives 1; the estimate's own scatter, about 2/√n, is allowed for by
+#: :func:`correlation_threshold`
 CORRELATED_TAU = 1.2
 #: the longest lag summed [samples]; the sum stops earlier at the first ρ_k below RHO_STOP
 MAX_LAG, RHO_STOP = 200, 0.05
 
 
+def correlation_threshold(n: int) -> float:
+    """τ above which n white-noise residuals would rarely reach: 1.2, or 1 + 6/√n on a short campaign."""
+    return max(CORRELATED_TAU, 1.0 + 6.0 / np.sqrt(max(n, 1)))
+
+
 def correlation_times(residuals: dict, sigma: dict, inliers: dict, run_of: np.ndarray) -> dict:
     """Integrated autocorrelation time τ = 1 + 2 Σ ρ_k [samples] of each running channel's
-    normalized residuals, pooled over runs (channel → τ).
+    normalized residuals, pooled over runs (channel → (τ, the samples it rests on)).
 
     The fit weighs n samples of a run as n independent readings; where the noise is band-limited
     (a sensor's filter, a DAQ sampling above the sensor's bandwidth, a log interpolated to a finer
     rate) neighbouring residuals move together and a run holds about n/τ independent ones: the
-    standard errors then need √τ.  ρ_k is pooled over every run's consecutive inlier samples
-    (Σ e_t e_{t+k} / Σ e_t²), and the sum stops at the first ρ_k below :data:`RHO_STOP`
-    (Sokal's window, made safe for white noise: a true τ of 1 stays 1)."""
+    standard errors then need √τ.  ρ_k is pooled over every run's samples (Σ e_t e_{t+k} / Σ e_t²,
+    run means out; the runs laid end to end with MAX_LAG zeros between them, so that no pair
+    crosses a run and each lag is one dot product), and the sum stops at the first ρ_k below
+    :data:`RHO_STOP` (Sokal's window, made safe for white noise: a true τ of 1 stays 1).  A lag
+    counts samples, so it is one time step only where a run's steady samples are consecutive."""
     run_of = np.asarray(run_of)
     out = {}
+    if run_of.size == 0:
+        return out
+    boundary = np.r_[0, np.cumsum(run_of[1:] != run_of[:-1])]  # runs before each sample
+    target = np.arange(run_of.size) + MAX_LAG * boundary
     for c, r in residuals.items():
         if c == "breakaway" or c not in sigma or c not in inliers:
             continue
@@ -172,12 +184,13 @@ def correlation_times(residuals: dict, sigma: dict, inliers: dict, run_of: np.nd
         denom = float(np.dot(z, z))
         if denom <= 0:
             continue
+        padded = np.zeros(target[-1] + 1)
+        padded[target] = z
         tau = 1.0
-        for k in range(1, min(MAX_LAG, z.size - 1) + 1):
-            both = (run_of[:-k] == run_of[k:]) & ok[:-k] & ok[k:]  # a run's samples are contiguous
-            rho = float(np.dot(z[:-k][both], z[k:][both])) / denom
+        for k in range(1, MAX_LAG + 1):
+            rho = float(np.dot(padded[:-k], padded[k:])) / denom
             if rho < RHO_STOP:
                 break
             tau += 2.0 * rho
-        out[c] = tau
+        out[c] = (tau, int(ok.sum()))
     return out

@@ -71,7 +71,10 @@ def load_result(result_dir, spec=None):
                              f"give --motor")
     from motorid.physics.registry import get
 
-    mechanisms = tuple(get(m) for m in doc.get("fit", {}).get("mechanisms", []))
+    # a transducer's error (a zero, a gain, a lag) is the bench's, not the motor's: predict gives the motor,
+    # as the exports do (its parameters were fitted with it, so the motor's are unbiased)
+    mechanisms = tuple(m for m in (get(i) for i in doc.get("fit", {}).get("mechanisms", []))
+                       if not getattr(m, "sensor", False))
     return doc, spec, mechanisms
 
 

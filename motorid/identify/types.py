@@ -307,7 +307,7 @@ class FitResult:
     # variance model says (:func:`breakaway_sandwich`; over `free`, None where nothing was added)
     covariance_breakaway: np.ndarray | None = None
     # channel -> integrated autocorrelation time of its residuals [samples], where above
-    # noise.CORRELATED_TAU and the covariance was widened by it
+    # noise.correlation_threshold and the covariance was widened by it
     noise_correlation: dict = field(default_factory=dict)
 
     @property

@@ -85,8 +85,9 @@ FORMATS = ("csv", "text", "mat", "hdf5", "parquet", "xlsx", "tdms", "mdf")
 
 _TOP_KEYS = {"file", "convention", "channels", "constants", "absent", "extra", "grid"}
 _FILE_KEYS = {"format", "sheet", "header_row", "skip_rows", "delimiter", "decimal", "group"}
-#: a file with no run column: a pause of more than this many median time steps starts a new run
-RUN_GAP_STEPS = 20.0
+#: a file with no run column: a pause of more than this many median time steps, and of RUN_GAP_S
+#: seconds, starts a new run; so does a time that falls back by more than RUN_RESTART_STEPS steps
+RUN_GAP_STEPS, RUN_GAP_S, RUN_RESTART_STEPS = 20.0, 1.0, 5.0
 
 _CHANNEL_KEYS = {"name", "unit", "sign", "scale", "offset", "absolute", "atmosphere", "sample_rate_Hz"}
 
@@ -153,7 +154,9 @@ class ChannelMap:
         first = None
         grid = self._grid(source, file_label) if self.grid_axes else None
         read = (lambda name: source.get(name)) if rows is None else (lambda name: source.get(name, *rows))  # noqa: E731
-        for col, ch in self.channels.items():
+        order = sorted(self.channels.items(), key=lambda kv: kv[0] != "time_s")  # the time track first
+        t_ref = None
+        for col, ch in order:
             if ch.rate_Hz is not None:  # a time track from the sample rate: once the length is known
                 continue
             raw = grid[col] if grid is not None else read(ch.name)
@@ -163,11 +166,15 @@ class ChannelMap:
                 if raw.ndim != 1:
                     raise InputError(f"{file_label}: channel '{ch.name}' ({col} in {self.path}) has shape "
                                      f"{np.shape(raw)}, not one value per sample (a 2-D map needs [grid])")
+            if col == "time_s" and grid is None and rows is None:
+                t_ref = _seconds_of(raw, ch)
             if n is None:
                 n, first = raw.shape[0], (col, ch.name)
             elif raw.shape[0] != n:
-                raise InputError(f"{file_label}: channel '{ch.name}' ({col}) has {raw.shape[0]} samples but "
-                                 f"'{first[1]}' ({first[0]}) has {n}; resample them to one time base")
+                raw = _onto_time_base(source, ch, col, raw, t_ref, rows)
+                if raw is None:
+                    raise InputError(f"{file_label}: channel '{ch.name}' ({col}) has {raw_len(read, ch)} samples but "
+                                     f"'{first[1]}' ({first[0]}) has {n}; resample them to one time base")
             if COLUMNS[col] == "text":
                 columns[col] = _text(raw)
             else:
@@ -197,27 +204,33 @@ class ChannelMap:
 
     def _runs_by_time(self, stem: str, t: np.ndarray, rows) -> np.ndarray:
         """Run names for a file that maps no run column: a new run wherever the time track starts
-        again (a step ≤ 0) or pauses for more than :data:`RUN_GAP_STEPS` of its median step, as a
-        bench that logs its runs one after another into one file does.  The first run is named
-        after the file, the next ``<file>#2``, …; blocks of a stream (``rows``) carry on from
-        the block before."""
+        again (falls back by more than :data:`RUN_RESTART_STEPS` median steps) or pauses for more
+        than :data:`RUN_GAP_STEPS` of them and :data:`RUN_GAP_S`, as a bench that logs its runs one
+        after another into one file does; repeated stamps, a little backward jitter, a slower rate
+        later in the file and an empty time cell start none.  The first run is named after the
+        file, the next ``<file>#2``, …; blocks of a stream (``rows``) carry on from the block before."""
         t = np.asarray(t, dtype=float)
         if rows is None or rows[0] == 0:
             self._run_state = (None, 1, None)
         last, run, step = self._run_state
         if t.size == 0:
             return np.empty(0, dtype=object)
-        dt = np.diff(t, prepend=t[0] if last is None else last)
+        filled = pd.Series(t).ffill().to_numpy()  # an empty cell: measured from the last time there was
+        if last is not None:
+            filled = np.where(np.isnan(filled), last, filled)
+        prev = np.r_[filled[0] if last is None else last, filled[:-1]]
+        dt = filled - prev
         if step is None:
             positive = dt[dt > 0]
             step = float(np.median(positive)) if positive.size else None
-        breaks = dt <= 0
+        breaks = np.zeros(t.size, bool)
+        if step is not None:
+            breaks = (dt < -RUN_RESTART_STEPS * step) | (dt > max(RUN_GAP_STEPS * step, RUN_GAP_S))
         if last is None:
             breaks[0] = False
-        if step is not None:
-            breaks |= dt > RUN_GAP_STEPS * step
         number = run + np.cumsum(breaks)
-        self._run_state = (float(t[-1]), int(number[-1]), step)
+        tail = filled[np.isfinite(filled)]
+        self._run_state = (float(tail[-1]) if tail.size else last, int(number[-1]), step)
         names = np.array([stem if k == 1 else f"{stem}#{k}" for k in range(1, int(number[-1]) + 1)],
                          dtype=object)
         return names[number - 1]
@@ -260,6 +273,36 @@ def _text(raw: np.ndarray) -> np.ndarray:
             v = int(v)
         out.append("" if v is None or (isinstance(v, float) and math.isnan(v)) else str(v).strip())
     return np.array(out, dtype=object)
+
+
+def raw_len(read, ch) -> int:
+    return int(np.asarray(read(ch.name)).size)
+
+
+def _seconds_of(raw: np.ndarray, ch: Channel) -> np.ndarray | None:
+    """The mapped time track in seconds (None where it is not plain numbers)."""
+    if raw.dtype.kind not in "fiu":
+        return None
+    return np.asarray(raw, float) * _TIME_UNITS[ch.unit] if ch.unit in _TIME_UNITS else None
+
+
+def _onto_time_base(source, ch: Channel, col: str, raw: np.ndarray, t_ref, rows):
+    """A channel recorded at another rate than the time track (an MDF4 recorder's channel groups: the
+    pressures at 1 kHz, the speed at 100 Hz, the temperature at 1 Hz) → its values at the time track's
+    instants, from its own time stamps (``<name>@time``): linear for numbers, the last value for text.
+    None where the source has no time stamps for it, or the whole file is not being read."""
+    if t_ref is None or rows is not None or ch.name.endswith("@time"):
+        return None
+    try:
+        t_own = np.asarray(source.get(ch.name + "@time"), dtype=float)
+    except (InputError, KeyError, ValueError, TypeError, AttributeError):
+        return None
+    if t_own.shape != raw.shape or t_own.size < 2 or np.any(np.diff(t_own) < 0):
+        return None
+    if COLUMNS[col] == "text" or raw.dtype.kind not in "fiub":
+        idx = np.clip(np.searchsorted(t_own, t_ref, side="right") - 1, 0, t_own.size - 1)
+        return raw[idx]
+    return np.interp(t_ref, t_own, raw.astype(float))  # the first and last value held beyond its stamps
 
 
 def _numeric(raw: np.ndarray, file_label: str, ch: Channel, offset: int = 0) -> np.ndarray:

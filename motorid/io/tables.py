@@ -395,6 +395,11 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
         if "t" in effs and len(effs) == 1:
             raise InputError(f"{path}: column '{fields[found['eff:t'][0]]}': an overall efficiency alone cannot "
                              f"be split into torque and flow; give the volumetric or the hydromechanical one too")
+        for k, x in effs.items():
+            if np.isfinite(x).any() and np.nanmedian(x) > 1.5:
+                raise InputError(f"{path}: column '{fields[found['eff:' + k][0]]}': efficiencies of "
+                                 f"{np.nanmedian(x):.3g} in the median read as fractions: per cent? (name the "
+                                 f"column with _pct, or map it with unit = \"%\")")
         derived, words = outputs_from_efficiencies(effs, speed, p_a, p_b, displacement)
         used = False
         for c, x in derived.items():
@@ -517,54 +522,10 @@ def read_tables(paths, spec=None, require_outputs: bool = True, channels=None) -
         else:
             out.append(read_table(p, spec, require_outputs))
         if require_outputs:
+            from motorid.io.table_checks import check_against_ideal
+
             check_against_ideal(out[-1], p)
     return concat_tables(out)
-
-
-#: the measured port flow over the swept flow D·ω/2π, and the torque over the ideal D·ΔP/2π, that a
-#: table must show (least-squares slopes through the origin); outside, a unit, a sign convention or the
-#: spec's displacement is wrong (gpm read as L/min: 3.79; rad/s as rpm: 0.105; in³ as cm³: 16.4;
-#: psi as bar: 0.069; a pump map's flow against its speed: −1)
-IDEAL_RATIO = (0.4, 2.5)
-
-
-def _slope(measured, ideal, floor) -> tuple[float, int]:
-    ok = np.isfinite(measured) & np.isfinite(ideal) & (np.abs(ideal) > floor)
-    if ok.sum() < 3:
-        return float("nan"), int(ok.sum())
-    return float(np.sum(measured[ok] * ideal[ok]) / np.sum(ideal[ok] ** 2)), int(ok.sum())
-
-
-def check_against_ideal(table: PointTable, path) -> None:
-    """Refuse a table whose port flows or torque are not near the ideal machine's (one line).
-
-    The swept flow D·ω/2π into port A (out of port B) and the pressure torque D·ΔP/2π set the scale of
-    every loss map, pump or motor: volumetric and hydromechanical efficiencies lie well inside
-    :data:`IDEAL_RATIO`.  Points above a tenth of the largest |ω| (|ΔP|) count.  A ratio outside it is
-    a unit, a sign convention or a displacement error, which the fit would otherwise take into K_L or
-    K_F and report as identified."""
-    name = Path(str(path)).name
-    d = np.asarray(table.displacement, float) / (2.0 * np.pi)
-    swept = d * table.speed
-    ideal = d * table.dp
-    checks = [("q_a", "port A flow", swept, "the swept flow D·ω/2π", 1.0),
-              ("q_b", "port B flow", swept, "the swept flow D·ω/2π (taken out of port B)", -1.0),
-              ("torque", "torque", ideal, "the ideal torque D·ΔP/2π", 1.0)]
-    for ch, words, base, base_words, sign in checks:
-        x = np.asarray(table.measured.get(ch, np.full(len(table), np.nan)), float)
-        floor = 0.1 * np.nanmax(np.abs(base)) if np.isfinite(base).any() else np.inf
-        k, n = _slope(sign * x, base, floor)
-        if not np.isfinite(k) or IDEAL_RATIO[0] <= k <= IDEAL_RATIO[1]:
-            continue
-        cm3 = float(np.nanmedian(table.displacement)) * 1e6
-        if k < 0:
-            why = ("its sign runs against the ideal machine's: a sign convention (a pump map's "
-                   "torque and flow, the speed's direction: docs/formats.md, channel maps)")
-        else:
-            why = ("a unit (gpm read as L/min gives 3.79, rad/s as rpm 0.105, psi as bar 0.069), or the "
-                   "spec's displacement (in³ written as cm³ gives 0.061)")
-        raise InputError(f"{name}: {words} is {k:.3g}× {base_words} of D = {cm3:.4g} cm³/rev over {n} points, "
-                         f"outside {IDEAL_RATIO[0]}-{IDEAL_RATIO[1]}: {why}")
 
 
 def split_logs_and_tables(paths, channels=None) -> tuple[list, list]:
