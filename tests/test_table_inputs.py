@@ -372,3 +372,32 @@ def test_efficiencies_in_per_cent_under_a_fraction_header_are_named(made):
         .to_csv(d / "pct.csv", index=False)
     with pytest.raises(InputError, match=r"column 'volumetric_efficiency': efficiencies of 95 .* per cent\?"):
         read_tables([d / "pct.csv"], spec)
+
+
+def test_a_workbook_with_a_sheet_per_temperature_reads_in_one_go(made):
+    """A maker's .xlsx with an info sheet and one sheet per oil temperature: '[file] sheet: expected
+    text' for a list, and the default sheet's refusal named neither it nor the others."""
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    cols = ["speed_rpm", "p_a_bar", "p_b_bar", "torque_Nm", "q_a_lpm"]
+    half = len(df) // 2
+    with pd.ExcelWriter(d / "maker.xlsx", engine="openpyxl") as xw:
+        pd.DataFrame({"note": ["test report 17"]}).to_excel(xw, sheet_name="Info", index=False)
+        df[cols].iloc[:half].rename(columns={"speed_rpm": "n"}).to_excel(xw, sheet_name="50C", index=False)
+        df[cols].iloc[half:].rename(columns={"speed_rpm": "n"}).to_excel(xw, sheet_name="50C bis", index=False)
+    channels = "\n".join(f'{c} = {{name = "{c}", unit = "{u}"}}' for c, u in
+                         (("p_a_bar", "bar"), ("p_b_bar", "bar"), ("torque_Nm", "N*m"), ("q_a_lpm", "l/min")))
+    body = f'[channels]\nspeed_rpm = {{name = "n", unit = "rpm"}}\n{channels}\n[constants]\noil_temp_C = 50.0\n'
+    (d / "map.toml").write_text('[file]\nsheet = ["50C", "50C bis"]\n' + body + '[extra]\nrecording = "sheet"\n')
+    got = read_tables([d / "maker.xlsx"], spec, channels=d / "map.toml")
+    np.testing.assert_allclose(got.speed, read_tables([_csv(d, df)], spec).speed)
+    assert list(np.unique(got.recording)) == ["50C", "50C bis"]
+    (d / "first.toml").write_text(body)  # the first sheet: the info sheet
+    with pytest.raises(InputError, match=r"no channel 'n' .*\(sheet Info; the workbook's sheets: Info, 50C, 50C bis\)"):
+        read_tables([d / "maker.xlsx"], spec, channels=d / "first.toml")
+
+
+def _csv(d, df):
+    df.to_csv(d / "map.csv", index=False)
+    return d / "map.csv"

@@ -472,8 +472,12 @@ def parse_channel_map(doc: dict, path: str) -> ChannelMap:
     if "format" in file and file["format"] not in FORMATS:
         raise InputError(f"{path}: [file] format: unknown format {file['format']!r} (one of {', '.join(FORMATS)})")
     for key in ("sheet", "delimiter", "group"):
+        if key == "sheet" and isinstance(file.get(key), list) and file[key] \
+                and all(isinstance(v, str) for v in file[key]):
+            continue  # several sheets of one workbook, read one after another
         if key in file and (isinstance(file[key], bool) or not isinstance(file[key], (str, int))):
-            raise InputError(f"{path}: [file] {key}: expected text, got {file[key]!r}")
+            raise InputError(f"{path}: [file] {key}: expected text, got {file[key]!r}"
+                             + (" (or a list of sheet names, or \"*\" for every sheet)" if key == "sheet" else ""))
     if file.get("decimal", ".") not in (".", ","):
         raise InputError(f"{path}: [file] decimal: '.' or ',', got {file['decimal']!r}")
     if "header_row" in file and (isinstance(file["header_row"], bool) or not isinstance(file["header_row"], int)

@@ -60,8 +60,8 @@ def _not_found(path, name: str, names) -> InputError:
 class _Columns:
     """A tabular source: a DataFrame whose columns are the channels."""
 
-    def __init__(self, path, frame: pd.DataFrame):
-        self.path, self.frame = path, frame
+    def __init__(self, path, frame: pd.DataFrame, where: str = ""):
+        self.path, self.frame, self.where = path, frame, where
 
     def names(self):
         return [str(c) for c in self.frame.columns]
@@ -70,7 +70,8 @@ class _Columns:
         if name not in self.frame.columns:
             matches = [c for c in self.frame.columns if str(c).strip() == name.strip()]
             if len(matches) != 1:
-                raise _not_found(self.path, name, self.names())
+                err = _not_found(self.path, name, self.names())
+                raise InputError(f"{err} ({self.where})") if self.where else err
             name = matches[0]
         col = self.frame[name]
         if isinstance(col, pd.DataFrame):
@@ -79,6 +80,29 @@ class _Columns:
 
     def table(self) -> pd.DataFrame:
         return self.frame
+
+
+def _workbook(path: Path, options: dict) -> _Columns:
+    """An Excel workbook's sheet ([file] sheet: a name or index; default the first), or several sheets
+    read one after another (a list of names, or "*" for every sheet; a map's ``[extra] recording =
+    "sheet"`` then gives each sheet its own recording), as one table with a ``sheet`` column."""
+    header = options.get("header_row", 1) - 1
+    skip = list(range(header + 1, header + 1 + int(options.get("skip_rows", 0))))  # a units row
+    with pd.ExcelFile(path, engine="openpyxl") as book:
+        names = [str(n) for n in book.sheet_names]
+    want = options.get("sheet", 0)
+    chosen = names if want == "*" else (list(want) if isinstance(want, list) else [want])
+    for sheet in chosen:
+        if isinstance(sheet, str) and sheet not in names:
+            raise InputError(f"{path}: no sheet '{sheet}' (the workbook has: {', '.join(names)})")
+        if isinstance(sheet, int) and not 0 <= sheet < len(names):
+            raise InputError(f"{path}: no sheet {sheet} (the workbook has {len(names)}: {', '.join(names)})")
+    frames = [pd.read_excel(path, sheet_name=sheet, header=header, skiprows=skip or None, engine="openpyxl")
+              .assign(sheet=sheet if isinstance(sheet, str) else names[sheet]) for sheet in chosen]
+    frame = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+    label = ", ".join(str(f["sheet"].iloc[0]) if len(f) else "?" for f in frames)
+    return _Columns(path, frame, where=f"sheet {label}" + ("" if len(names) == 1 else
+                                                           f"; the workbook's sheets: {', '.join(names)}"))
 
 
 # --------------------------------------------------------------------------- text
@@ -483,11 +507,7 @@ def open_source(path, cmap=None, stream: bool = False):
 
             return _Columns(path, pq.read_table(str(path)).to_pandas())
         if fmt == "xlsx":
-            header = options.get("header_row", 1) - 1
-            skip = list(range(header + 1, header + 1 + int(options.get("skip_rows", 0))))  # a units row
-            frame = pd.read_excel(path, sheet_name=options.get("sheet", 0), header=header, skiprows=skip or None,
-                                  engine="openpyxl")
-            return _Columns(path, frame)
+            return _workbook(path, options)
         if fmt == "tdms":
             return _tdms(path, options.get("group"), stream)
         if fmt == "mdf":
