@@ -764,3 +764,31 @@ def _whole_map(folder):
     path = folder / "whole.toml"
     path.write_text(map_text())
     return path
+
+
+def test_a_tdms_file_with_a_group_per_run_reads_every_group_as_a_run(campaign, tmp_path):
+    """NI loggers often write a test as one group per run: 'channel … is in several groups; write it as
+    group/…', and following that read one run.  [file] group = "*" reads every group, each a run named
+    after it, with each group's waveform timing."""
+    from nptdms import ChannelObject, GroupObject, TdmsWriter
+
+    csv, raw, _ = campaign
+    run = raw["RunNo"]
+    path = tmp_path / "groups.tdms"
+    with TdmsWriter(str(path)) as w:
+        for r in np.unique(run)[:4]:
+            sel = run == r
+            step = float(np.median(np.diff(raw["t"][sel])))  # each run at its own rate
+            group = f"Run {int(r):03d}"
+            w.write_segment([GroupObject(group)] + [
+                ChannelObject(group, k, v[sel], properties={"wf_increment": step, "wf_start_offset": 0.0})
+                for k, v in raw.items() if k not in ("t", "RunNo")])
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text(time_name="n_Motor@time", fmt_lines='[file]\ngroup = "*"')
+                    .replace('run_id = {name = "RunNo"}\n', ""))
+    got = read_logs(path, load_motor_spec(MOTOR), channels=cmap)
+    assert list(pd.unique(got["run_id"].astype(str))) == ["Run 001", "Run 002", "Run 003", "Run 004"]
+    keep = np.isin(run, np.unique(run)[:4])
+    np.testing.assert_allclose(got["p_b_Pa"], raw["pB"][keep] * 1e6, rtol=1e-12)
+    t0 = np.concatenate([raw["t"][run == r] - raw["t"][run == r][0] for r in np.unique(run)[:4]])
+    np.testing.assert_allclose(got["time_s"], t0, atol=1e-6)

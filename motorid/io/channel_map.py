@@ -189,7 +189,10 @@ class ChannelMap:
             columns[col] = np.full(n, value, dtype=object if isinstance(value, str) else float)
         for col in self.absent:
             columns[col] = np.full(n, np.nan)
-        if "run_id" not in columns and self.is_log:
+        if "run_id" not in columns and self.is_log and hasattr(source, "sample_groups"):
+            named = next((ch.name for c, ch in self.channels.items() if ch.rate_Hz is None), None)
+            columns["run_id"] = source.sample_groups(named)  # a group per run: the group's name
+        elif "run_id" not in columns and self.is_log:
             columns["run_id"] = self._runs_by_time(_stem(file_label), columns["time_s"], rows)
         elif "run_id" not in columns and "point_id" not in columns:
             columns["run_id"] = np.full(n, _stem(file_label), dtype=object)

@@ -385,6 +385,9 @@ def _tdms(path: Path, group: str | None, stream: bool = False):
             tdms.close()
         raise
 
+    if group == "*":  # a group per run (as many NI loggers write a test): the groups one after another
+        return _TdmsGroups(path, tdms)
+
     class _Tdms:
         def names(self):
             return [f"{g.name}/{c.name}" for g in tdms.groups() for c in g.channels()]
@@ -436,6 +439,55 @@ def _tdms(path: Path, group: str | None, stream: bool = False):
             return _columns_of(path, {c.name: c[:] for c in groups[0].channels()})
 
     return _Tdms()
+
+
+class _TdmsGroups:
+    """Every group of a TDMS file, one after another ([file] group = "*"): a channel is its values in
+    each group (``name@time`` each group's waveform time track), and :meth:`sample_groups` the group
+    of each sample, the run of a map that maps no run column.  Read whole (no blocks)."""
+
+    def __init__(self, path: Path, tdms):
+        self.path, self.tdms, self.groups = path, tdms, list(tdms.groups())
+        if not self.groups:
+            raise InputError(f"{path}: no group in the file")
+
+    def close(self):
+        close = getattr(self.tdms, "close", None)
+        if close is not None:
+            close()
+
+    def names(self):
+        return [c.name for c in self.groups[0].channels()]
+
+    def _each(self, name: str):
+        base = name[:-5] if name.endswith("@time") else name
+        out = []
+        for g in self.groups:
+            if base not in [c.name for c in g.channels()]:
+                raise InputError(f"{self.path}: group '{g.name}' has no channel '{base}' (group = \"*\" reads "
+                                 f"every group as a run; each must hold the mapped channels)")
+            ch = g[base]
+            if name.endswith("@time"):
+                try:
+                    out.append(np.asarray(ch.time_track(), dtype=float))
+                except (KeyError, ValueError) as exc:
+                    raise InputError(f"{self.path}: channel '{g.name}/{base}' has no waveform timing ({exc})") \
+                        from None
+            else:
+                with _QuietTruncation():
+                    out.append(np.asarray(ch[:]))
+        return out
+
+    def get(self, name: str):
+        parts = self._each(name)
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    def sample_groups(self, name: str) -> np.ndarray:
+        """The group name of every sample of channel ``name``."""
+        return np.concatenate([np.full(len(x), g.name, dtype=object) for g, x in zip(self.groups, self._each(name))])
+
+    def table(self):
+        return _columns_of(self.path, {n: self.get(n) for n in self.names()})
 
 
 def _mdf(path: Path):
