@@ -52,6 +52,15 @@ class OilSpec:
             temperature_C, self.nu40_cSt, self.nu100_cSt, self.density15_kg_m3, self.expansion_per_K, **kw
         )
 
+    def dynamic_from_kinematic(self, nu_m2_s, temperature_C):
+        """A viscometer's kinematic reading ν [m²/s] → μ = ρ(T) ν [Pa·s] (numpy, for a reader's column),
+        ρ at the oil temperature [°C] where it is finite, else at the temperature at which this oil has
+        that ν (the Walther relation inverted)."""
+        nu = np.asarray(nu_m2_s, dtype=float)
+        t = np.where(np.isfinite(temperature_C), temperature_C,
+                     oil.temperature_of_viscosity(nu / 1e-6, self.nu40_cSt, self.nu100_cSt, xp=np))
+        return nu * oil.density(t, self.density15_kg_m3, self.expansion_per_K, xp=np)
+
 
 @dataclass(frozen=True)
 class MotorSpec:

@@ -69,5 +69,8 @@ FORMAT_COLUMNS = {
 SI_COLUMNS = ["run_id", "protocol", *FORMAT_COLUMNS]
 #: the model's running channels (motorid.model.Channels), SI: torque [N·m], flows [m³/s]
 RUNNING_CHANNELS = ("torque", "q_a", "q_b", "q_case")
+#: each fitted channel in words (fit warnings, diagnose's located structure)
+CHANNEL_WORDS = {"torque": "running torque", "q_a": "port A flow", "q_b": "port B flow",
+                 "q_case": "case-drain flow", "breakaway": "breakaway (held) torque"}
 #: every fitted channel: the running ones and the held torque at breakaway [N·m]
 CHANNELS = (*RUNNING_CHANNELS, "breakaway")

@@ -472,12 +472,18 @@ def test_a_timestamp_time_channel_reads_as_seconds(campaign, tmp_path):
     stamps = start + (raw["t"] * 1e6).round().astype("timedelta64[us]")
     path = tmp_path / "bench.parquet"
     pd.DataFrame(dict(raw, t=stamps)).to_parquet(path)
-    cmap = tmp_path / "map.toml"
+    _time_reads_as_seconds_and_not_as_ms(path, csv, spec, tmp_path, r"holds timestamps")
+
+
+def _time_reads_as_seconds_and_not_as_ms(path, csv, spec, folder, refusal: str):
+    """``path``'s time channel 't', mapped with unit = "s", steps as the CSV twin's time; mapped as ms,
+    refused in one line matching ``refusal``."""
+    cmap = folder / "map.toml"
     cmap.write_text(map_text())
     got, ref = read_logs(path, spec, channels=cmap), read_logs(csv, spec)
     np.testing.assert_allclose(np.diff(got["time_s"]), np.diff(ref["time_s"]), atol=2e-6)
     cmap.write_text(map_text().replace('time_s = {name = "t", unit = "s"}', 'time_s = {name = "t", unit = "ms"}'))
-    with pytest.raises(InputError, match=r"channel 't' \(time_s\) holds timestamps"):
+    with pytest.raises(InputError, match=r"channel 't' \(time_s\) " + refusal):
         read_logs(path, spec, channels=cmap)
 
 
@@ -615,13 +621,7 @@ def test_date_times_with_a_zone_or_as_text_read_as_seconds(form, campaign, tmp_p
         path = tmp_path / "bench.txt"
         pd.DataFrame(dict(raw, t=text)).to_csv(path, index=False, sep=";" if form == "day_first" else ",",
                                                float_format="%.17g")
-    cmap = tmp_path / "map.toml"
-    cmap.write_text(map_text())
-    got, ref = read_logs(path, spec, channels=cmap), read_logs(csv, spec)
-    np.testing.assert_allclose(np.diff(got["time_s"]), np.diff(ref["time_s"]), atol=2e-6)
-    cmap.write_text(map_text().replace('time_s = {name = "t", unit = "s"}', 'time_s = {name = "t", unit = "ms"}'))
-    with pytest.raises(InputError, match=r"channel 't' \(time_s\) holds (date-times|timestamps)"):
-        read_logs(path, spec, channels=cmap)
+    _time_reads_as_seconds_and_not_as_ms(path, csv, spec, tmp_path, r"holds (date-times|timestamps)")
 
 
 def test_runs_logged_one_after_another_without_a_run_column_are_told_apart_by_the_time(campaign, tmp_path):

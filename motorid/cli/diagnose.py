@@ -48,23 +48,21 @@ def run(args) -> int:
 
 
 def write_refit(out: Path, args, spec, mechanisms: list) -> None:
-    """result.json beside diagnosis.json: the fit of the same data with the mechanisms diagnose named, so
+    """result.json beside diagnosis.json: the fit of the same logs with the mechanisms diagnose named, so
     that `motorid predict`, `report` and `export` take the diagnosed model (a fit, as `motorid fit` writes
-    it; an empirical term of an unexplained entry is not in it)."""
+    it; an empirical term of an unexplained entry is not in it).  Tables: cli/tables.py."""
     from motorid import api
     from motorid.io.results import RESULT_FILE
-    from motorid.physics.registry import CATALOG
 
-    # a table's own hook (a viscosity per recording) is no model of the motor: the refit leaves it out
-    kept = [m for m in mechanisms if m in CATALOG]
-    refit = api.fit(args.logs, spec, mechanisms=kept, motor_path=args.motor, channels=args.channels)
+    refit = api.fit(args.logs, spec, mechanisms=mechanisms, motor_path=args.motor, channels=args.channels)
     refit.document["fit"]["from_diagnose"] = True
     target = refit_folder(out)
     refit.save(target)
-    with_what = ("with " + ", ".join(kept)) if kept else "the 1992 model alone: no catalog mechanism was named"
-    left = [m for m in mechanisms if m not in CATALOG]
-    print(f"wrote {target / RESULT_FILE} (the fit {with_what}"
-          + (f"; {', '.join(left)} describes the recordings, not the motor, and is left out" if left else "")
+    say_refit(target / RESULT_FILE, mechanisms)
+
+
+def say_refit(path: Path, mechanisms) -> None:
+    print(f"wrote {path} (the fit " + (f"with {', '.join(mechanisms)}" if mechanisms else "of the 1992 model alone")
           + "; predict, report and export take it)")
 
 

@@ -121,14 +121,12 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
     print(f"wrote {out / 'diagnosis.json'}")
     # result.json: the fit with what diagnose kept (its own fit and held-out comparison), for predict,
     # report and export
-    from motorid.cli.diagnose import refit_folder
+    from motorid.cli.diagnose import refit_folder, say_refit
 
     result = diagnosed_result_document(dg, spec, doc["inputs"])
     target = refit_folder(out)
     target.mkdir(parents=True, exist_ok=True)
     write_json_atomic(result, target / "result.json")
-    kept = result["fit"]["mechanisms"]
-    print(f"wrote {target / 'result.json'} (the fit " + (f"with {', '.join(kept)}" if kept else "of the 1992 model alone")
-          + "; predict, report and export take it)")
+    say_refit(target / "result.json", result["fit"]["mechanisms"])
     return 0
 

@@ -28,10 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from motorid.units import LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S, RUNNING_CHANNELS
+from motorid.units import CHANNEL_WORDS, LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S, RUNNING_CHANNELS
 
-CHANNEL_WORDS = {"torque": "running torque", "q_a": "port A flow", "q_b": "port B flow",
-                 "q_case": "case-drain flow", "breakaway": "breakaway (held) torque"}
 UNIT = {"torque": ("N·m", 1.0), "breakaway": ("N·m", 1.0), "q_a": ("L/min", LPM_PER_M3S),
         "q_b": ("L/min", LPM_PER_M3S), "q_case": ("L/min", LPM_PER_M3S)}
 

@@ -38,6 +38,27 @@ def _why_no_running(data, n_run: int) -> str:
     return " (running runs left out: " + ", ".join(f"{w} ×{n}" for w, n in counts.items()) + ")"
 
 
+#: the reason K_F gets where every torque reading sits at one port-pressure sum (logs and tables)
+KF_HELD_FOR_TFC = ("K_F cannot be told from T_Fc, so it is held at its start value and T_Fc carries "
+                   "K_F·D·(P_A+P_B) there")
+
+
+def single_pressure_sum_reason(what: str, psum) -> str:
+    """K_F's reason where ``what`` (the running torque, a table's torque) sits at one P_A+P_B [Pa]: K_F is
+    held at its start and T_Fc fitted, carrying K_F·D·(P_A+P_B) of that sum, so that the friction torque
+    there stays right and K_v does not take what two held values miss."""
+    return f"{what} at a single port-pressure sum P_A+P_B ({np.median(psum) / 1e5:.4g} bar): {KF_HELD_FOR_TFC}"
+
+
+def tfc_carries_kf_warning(reasons: dict, free, data: str, more: str) -> str | None:
+    """The warning that T_Fc is an effective value (``data``: "logs", "data"; ``more``: what tells them
+    apart, "runs", "points"), where K_F was held for a single pressure sum and T_Fc fitted; else None."""
+    if "TFc" not in free or KF_HELD_FOR_TFC not in reasons.get("KF", ""):
+        return None
+    return (f"T_Fc is the Coulomb friction at the one port-pressure sum of these {data}: it holds K_F·D·(P_A+P_B) "
+            f"there (K_F not identifiable, held at its start value); {more} at a second pressure tell them apart")
+
+
 def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
     """Reasons why the logs cannot identify a parameter, from what data exist.
 
@@ -58,11 +79,7 @@ def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
         if relative_spread(np.abs(mu_w)) < 0.05:
             reasons["Kv"] = "running torque at a single speed·viscosity level: viscous and Coulomb friction cannot be told apart"
         if relative_spread(psum[tq]) < 0.05:
-            # K_F held at its start, T_Fc fitted: it carries K_F·D·(P_A+P_B) of that one sum, so the
-            # friction torque there stays right and K_v does not take what two held values miss
-            reasons["KF"] = (f"running torque at a single port-pressure sum P_A+P_B "
-                             f"({np.median(psum[tq]) / 1e5:.4g} bar): K_F cannot be told from T_Fc, "
-                             f"so it is held at its start value and T_Fc carries K_F·D·(P_A+P_B) there")
+            reasons["KF"] = single_pressure_sum_reason("running torque", psum[tq])
     n_ev = 0 if data.events is None else int(np.asarray(data.held_torque).size)
     good_ev = _has(data.held_torque) if n_ev else np.zeros(0, bool)
     if good_ev.sum() == 0:

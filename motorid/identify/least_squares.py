@@ -21,19 +21,18 @@ import numpy as np
 
 from motorid import model
 from motorid.identify.covariance import breakaway_sandwich, covariance_from_normal, viscosity_covariance
-from motorid.identify.identifiability import coverage_reasons
+from motorid.identify.identifiability import coverage_reasons, tfc_carries_kf_warning
 from motorid.identify.noise import correlation_threshold, correlation_times
 from motorid.identify.noise import breakaway_noise, floor_noise, initial_noise, residual_noise, spikiness
 from motorid.identify.problem import Problem
 from motorid.identify.solver import backend_for, gauss_newton_start, solve
 from motorid.identify.types import RUNNING_CHANNELS, FitOptions, FitResult
 from motorid.robust import robust_std
+from motorid.units import CHANNEL_WORDS
 
 
 #: χ²/dof of a channel above which a fit warns that the model misses the logs (a clean fit: 1 ± a few %)
 CHI2_WARN = 4.0
-_WORDS = {"torque": "running torque", "q_a": "port A flow", "q_b": "port B flow", "q_case": "case-drain flow",
-          "breakaway": "breakaway torque"}
 
 
 def start_values(spec, mechanisms, opt: FitOptions, initial: dict | None):
@@ -190,7 +189,7 @@ def _correlated_noise(problem: Problem, noise, residuals, sig, inliers, run_of, 
     problem.set_cells(noise.inliers, {c: (v * np.sqrt(taus[c]) if c in taus else v) for c, v in noise.runs.items()},
                       noise.breakaway)
     warnings.append("the residuals are correlated in time (" + ", ".join(
-        f"{_WORDS.get(c, c)}: τ = {t:.3g} samples" for c, t in taus.items()) + "), as band-limited noise or a "
+        f"{CHANNEL_WORDS.get(c, c)}: τ = {t:.3g} samples" for c, t in taus.items()) + "), as band-limited noise or a "
         "sample rate above the sensors' bandwidth gives: each run holds about n/τ independent readings, and "
         "the standard errors are widened by √τ")
     return taus
@@ -266,10 +265,9 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         steps_total += steps
     if not converged:
         warnings.append("Levenberg-Marquardt stopped at max_steps before converging; raise FitOptions.max_steps")
-    if "KF" in reasons and "TFc" in free and reasons["KF"].startswith("running torque at a single"):
-        warnings.append("T_Fc is the Coulomb friction at the one port-pressure sum of these logs: it holds "
-                        "K_F·D·(P_A+P_B) there (K_F not identifiable, held at its start value); runs at a "
-                        "second pressure tell them apart")
+    effective = tfc_carries_kf_warning(reasons, free, "logs", "runs")
+    if effective:
+        warnings.append(effective)
 
     inliers = noise.inliers
     pred = problem.predictions(values)
@@ -282,7 +280,8 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
                    for c in obs if used[c] > 10}
     missed = {c: r for c, r in per_channel.items() if r > CHI2_WARN}
     if missed:
-        warnings.append("χ²/dof = " + ", ".join(f"{r:.3g} in the {_WORDS.get(c, c)}" for c, r in missed.items())
+        warnings.append("χ²/dof = " + ", ".join(f"{r:.3g} in the {CHANNEL_WORDS.get(c, c)}"
+                                                 for c, r in missed.items())
                         + ": the model misses these logs far beyond their noise, and the values above carry "
                         "what it misses (physics the model lacks, a sensor's error, a parameter the logs cannot "
                         "determine): `motorid diagnose` locates it")

@@ -45,7 +45,8 @@ import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
 from motorid import model
-from motorid.identify.identifiability import coverage_reasons, one_back_pressure_warning, relative_spread
+from motorid.identify.identifiability import (coverage_reasons, one_back_pressure_warning, relative_spread,
+                                              single_pressure_sum_reason, tfc_carries_kf_warning)
 from motorid.identify.results import operating_ranges
 from motorid.identify.types import FitResult
 from motorid.model import Channels
@@ -115,10 +116,7 @@ def table_coverage_reasons(table, spec, names: Sequence[str]) -> dict:
             reasons["Kv"] = ("torque at a single speed·viscosity level: viscous and Coulomb friction cannot be "
                              "told apart")
         if relative_spread((table.displacement * (table.p_a + table.p_b))[tq]) < 0.05:
-            # as for logs (identifiability.coverage_reasons): K_F held, T_Fc carries K_F·D·(P_A+P_B)
-            reasons["KF"] = (f"torque at a single port-pressure sum P_A+P_B "
-                             f"({np.median((table.p_a + table.p_b)[tq]) / 1e5:.4g} bar): K_F cannot be told "
-                             f"from T_Fc, so it is held at its start value and T_Fc carries K_F·D·(P_A+P_B) there")
+            reasons["KF"] = single_pressure_sum_reason("torque", (table.p_a + table.p_b)[tq])
     for k in ("KFS", "Ks"):
         reasons[k] = NO_BREAKAWAY
     flows = {c: np.isfinite(m[c]) for c in ("q_a", "q_b", "q_case")}
@@ -449,10 +447,9 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
             warnings.append(f"{k}: standard error exceeds the value; the data barely constrain it")
     if not converged:
         warnings.append("the table fit stopped before converging (scipy least_squares, max_nfev)")
-    if "TFc" in free and "single port-pressure sum" in reasons.get("KF", ""):
-        warnings.append("T_Fc is the Coulomb friction at the one port-pressure sum of these data: it holds "
-                        "K_F·D·(P_A+P_B) there (K_F not identifiable, held at its start value); points at a "
-                        "second pressure tell them apart")
+    effective = tfc_carries_kf_warning(reasons, free, "data", "points")
+    if effective:
+        warnings.append(effective)
     if "KF" in free:
         tq = np.isfinite(table.measured["torque"]) & train
         note = one_back_pressure_warning(np.minimum(table.p_a, table.p_b)[tq], values["KF"])

@@ -32,7 +32,8 @@ import pandas as pd
 
 from motorid.errors import InputError
 from motorid.io.logs import (_ANGLE_UNITS, _FLOW_UNITS, _PRESSURE_UNITS, _SPEED_UNITS, _TEMPERATURE_UNITS,
-                          _TIME_UNITS, _TORQUE_UNITS, _VISCOSITY_UNITS, PROTOCOLS, normalize_header)
+                          _TIME_UNITS, _TORQUE_UNITS, _VISCOSITY_UNITS, PROTOCOLS, looks_like_a_unit,
+                          normalize_header)
 
 _IN3 = 0.0254 ** 3  # m³ per cubic inch
 _ATMOSPHERE_PA = 101325.0
@@ -171,10 +172,11 @@ class ChannelMap:
             if n is None:
                 n, first = raw.shape[0], (col, ch.name)
             elif raw.shape[0] != n:
-                raw = _onto_time_base(source, ch, col, raw, t_ref, rows)
-                if raw is None:
-                    raise InputError(f"{file_label}: channel '{ch.name}' ({col}) has {raw_len(read, ch)} samples but "
+                resampled = _onto_time_base(source, ch, col, raw, t_ref, rows)
+                if resampled is None:
+                    raise InputError(f"{file_label}: channel '{ch.name}' ({col}) has {raw.shape[0]} samples but "
                                      f"'{first[1]}' ({first[0]}) has {n}; resample them to one time base")
+                raw = resampled
             if COLUMNS[col] == "text":
                 columns[col] = _text(raw)
             else:
@@ -190,7 +192,7 @@ class ChannelMap:
         for col in self.absent:
             columns[col] = np.full(n, np.nan)
         if "run_id" not in columns and self.is_log and hasattr(source, "sample_groups"):
-            named = next((ch.name for c, ch in self.channels.items() if ch.rate_Hz is None), None)
+            named = next(ch.name for ch in self.channels.values() if ch.rate_Hz is None)
             columns["run_id"] = source.sample_groups(named)  # a group per run: the group's name
         elif "run_id" not in columns and self.is_log:
             columns["run_id"] = self._runs_by_time(_stem(file_label), columns["time_s"], rows)
@@ -278,10 +280,6 @@ def _text(raw: np.ndarray) -> np.ndarray:
     return np.array(out, dtype=object)
 
 
-def raw_len(read, ch) -> int:
-    return int(np.asarray(read(ch.name)).size)
-
-
 def _seconds_of(raw: np.ndarray, ch: Channel) -> np.ndarray | None:
     """The mapped time track in seconds (None where it is not plain numbers)."""
     if raw.dtype.kind not in "fiu":
@@ -324,9 +322,8 @@ def _numeric(raw: np.ndarray, file_label: str, ch: Channel, offset: int = 0) -> 
     values = pd.to_numeric(pd.Series(raw.ravel()), errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(np.isnan(values) & ~pd.isna(pd.Series(raw.ravel())).to_numpy())
     if bad.size:
-        value = str(raw.ravel()[bad[0]]).strip()
         hint = (" (a units row under the header? [file] skip_rows = 1 leaves it out)"
-                if offset + bad[0] == 0 and re.fullmatch(r"[\[(]?[^\d\s]+[\])]?", value) else "")
+                if offset + bad[0] == 0 and looks_like_a_unit(raw.ravel()[bad[0]]) else "")
         raise InputError(f"{file_label}: channel '{ch.name}' ({ch.column}), sample {offset + bad[0] + 1}: "
                          f"'{raw.ravel()[bad[0]]}' is not a number{hint}")
     return values

@@ -62,6 +62,6 @@ def outputs_from_efficiencies(eff: dict, speed, p_a, p_b, displacement) -> tuple
     q_b = np.where(dp < 0, q_hp, np.nan)
     given = ", ".join(WORDS[k] for k in ("v", "hm", "t") if k in eff)
     notes = [f"torque and the high-pressure port's flow derived from the {given} efficiency (ISO 4409: "
-             f"T = η_hm·DΔP/2π, Q = Dω/2π/η_v in motor mode; T = DΔP/2π/η_hm, Q = η_v·Dω/2π in pump mode); "
-             f"the other port and the case drain are not in an efficiency"]
+             f"T = η_hm·DΔP/2π, Q = Dω/2π/η_v in motor mode; T = DΔP/2π/η_hm, Q = η_v·Dω/2π in pump "
+             f"mode); the other port and the case drain are not in an efficiency"]
     return {"torque": torque, "q_a": q_a, "q_b": q_b}, notes

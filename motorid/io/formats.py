@@ -459,14 +459,20 @@ class _TdmsGroups:
     def names(self):
         return [c.name for c in self.groups[0].channels()]
 
-    def _each(self, name: str):
-        base = name[:-5] if name.endswith("@time") else name
+    def _channels(self, base: str):
+        """The channel ``base`` of every group."""
         out = []
         for g in self.groups:
             if base not in [c.name for c in g.channels()]:
                 raise InputError(f"{self.path}: group '{g.name}' has no channel '{base}' (group = \"*\" reads "
                                  f"every group as a run; each must hold the mapped channels)")
-            ch = g[base]
+            out.append(g[base])
+        return out
+
+    def _each(self, name: str):
+        base = name[:-5] if name.endswith("@time") else name
+        out = []
+        for g, ch in zip(self.groups, self._channels(base)):
             if name.endswith("@time"):
                 try:
                     out.append(np.asarray(ch.time_track(), dtype=float))
@@ -483,8 +489,10 @@ class _TdmsGroups:
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def sample_groups(self, name: str) -> np.ndarray:
-        """The group name of every sample of channel ``name``."""
-        return np.concatenate([np.full(len(x), g.name, dtype=object) for g, x in zip(self.groups, self._each(name))])
+        """The group name of every sample of channel ``name`` (from the channels' lengths, nothing read)."""
+        base = name[:-5] if name.endswith("@time") else name
+        return np.concatenate([np.full(len(ch), g.name, dtype=object)
+                               for g, ch in zip(self.groups, self._channels(base))])
 
     def table(self):
         return _columns_of(self.path, {n: self.get(n) for n in self.names()})

@@ -39,6 +39,14 @@ def assumed_temperature(temp, mu, oil, where: str):
         raise InputError(f"{where}: no oil temperature and no viscosity in this log: map oil_temp_C or a "
                          f"viscosity, or give [oil] temp_C in the motor spec to assume one")
     return np.full(temp.size, float(t_spec)), True
+
+
+def looks_like_a_unit(cell: str) -> bool:
+    """Whether a cell that is not a number reads like a unit ('rpm', '[bar]', '(Nm)'): the first data row
+    of a table that holds one is a units row under the header."""
+    return re.fullmatch(r"[\[(]?[^\d\s]+[\])]?", str(cell).strip()) is not None
+
+
 PROTOCOLS = ("constant_speed", "constant_pressure", "startability", "constant_flow", "constant_torque")
 
 # printf formats that keep more digits than any bench sensor resolves
@@ -302,7 +310,7 @@ def _parse_body(path: Path, body: str, delim: str, fields: list, found: dict, he
         if bad.size:
             i = int(bad[0])
             hint = (" (a units row under the header? a channel map with [file] skip_rows = 1 leaves it out: "
-                    "docs/formats.md)" if i == 0 and re.fullmatch(r"[\[(]?[^\d\s]+[\])]?", cells.iloc[i]) else "")
+                    "docs/formats.md)" if i == 0 and looks_like_a_unit(cells.iloc[i]) else "")
             raise InputError(f"{path}: column '{fields[j]}', line {header_line + 1 + i}: "
                              f"'{cells.iloc[i]}' is not a number{hint}")
     raise InputError(f"{path}: cannot parse as CSV")  # pragma: no cover
@@ -443,20 +451,17 @@ def read_log(path, spec=None, channels=None) -> pd.DataFrame:
 
     mu = out["viscosity_Pa_s"].to_numpy()
     oil = getattr(spec, "oil", None)
-    temp, assumed = assumed_temperature(temp, mu if kinematic is None else np.full(len(out), np.nan), oil,
-                                        str(path)) if kinematic is None else (temp, False)
-    if assumed:
-        out["oil_temp_C"] = temp
-    if kinematic is not None:
+    assumed = False
+    if kinematic is None:
+        temp, assumed = assumed_temperature(temp, mu, oil, str(path))
+        if assumed:
+            out["oil_temp_C"] = temp
+    else:
         name, nu = kinematic
         if oil is None:
             raise InputError(f"{path}: column '{name}' is a kinematic viscosity; a motor spec with an [oil] "
                              f"table is needed for the density")
-        from motorid.physics.oil import density, temperature_of_viscosity
-
-        t_rho = np.where(np.isfinite(temp), temp,  # no temperature: the one at which the oil has this ν
-                         temperature_of_viscosity(nu / 1e-6, oil.nu40_cSt, oil.nu100_cSt, xp=np))
-        mu = nu * density(t_rho, oil.density15_kg_m3, oil.expansion_per_K, xp=np)
+        mu = oil.dynamic_from_kinematic(nu, temp)
     gaps = np.isnan(mu)
     if gaps.any():
         if oil is None:

@@ -358,12 +358,7 @@ def _to_si(state: _FileState, block: dict) -> tuple[dict, np.ndarray, np.ndarray
     if kinematic is not None:
         if state.oil is None:
             raise _Invalid("kinematic viscosity without an [oil] density")
-        from motorid.physics.oil import density, temperature_of_viscosity
-
-        o = state.oil
-        t_rho = np.where(np.isfinite(temp), temp,  # no temperature: the one at which the oil has this ν
-                         temperature_of_viscosity(kinematic / 1e-6, o.nu40_cSt, o.nu100_cSt, xp=np))
-        mu = kinematic * density(t_rho, o.density15_kg_m3, o.expansion_per_K, xp=np)
+        mu = state.oil.dynamic_from_kinematic(kinematic, temp)
     gaps = np.isnan(mu)
     state.any_viscosity |= bool((~gaps).any())
     if gaps.any():

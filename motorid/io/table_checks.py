@@ -47,19 +47,24 @@ def _flow_coefficient(q, swept, p_a, p_b) -> tuple[float, int]:
     Xs = X / scale
     coef, _, rank, sv = np.linalg.lstsq(Xs, q[ok], rcond=None)
     if rank < X.shape[1] or X.shape[1] == 1 or sv[-1] < 1e-6 * sv[0]:  # the plain slope of the faster points
-        fast = ok & (np.abs(swept) > 0.1 * np.nanmax(np.abs(swept[ok])))
-        return float(np.sum(q[fast] * swept[fast]) / np.sum(swept[fast] ** 2)), int(fast.sum())
+        return _slope_of_larger(q, swept, ok, least=1)
     return float(coef[0] / scale[0]), int(ok.sum())
+
+
+def _slope_of_larger(y, x, ok, least: int) -> tuple[float, int]:
+    """The slope through the origin of y on x over the points of ``ok`` above a tenth of the largest |x|
+    (NaN where fewer than ``least``), and their count."""
+    ok = ok & (np.abs(x) > 0.1 * np.nanmax(np.abs(x[ok])))
+    if ok.sum() < least:
+        return float("nan"), int(ok.sum())
+    return float(np.sum(y[ok] * x[ok]) / np.sum(x[ok] ** 2)), int(ok.sum())
 
 
 def _torque_slope(t, ideal) -> tuple[float, int]:
     ok = np.isfinite(t) & np.isfinite(ideal)
     if ok.sum() < 3:
         return float("nan"), int(ok.sum())
-    ok &= np.abs(ideal) > 0.1 * np.nanmax(np.abs(ideal[ok]))
-    if ok.sum() < 3:
-        return float("nan"), int(ok.sum())
-    return float(np.sum(t[ok] * ideal[ok]) / np.sum(ideal[ok] ** 2)), int(ok.sum())
+    return _slope_of_larger(t, ideal, ok, least=3)
 
 
 def check_against_ideal(table, path) -> None:

@@ -312,13 +312,7 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
             if oil is None:
                 raise InputError(f"{path}: column '{fields[j]}' is a kinematic viscosity; a motor spec with an "
                                  f"[oil] table is needed for the density")
-            from motorid.physics.oil import density, temperature_of_viscosity
-
-            # no temperature: the one at which the oil has this ν (inverse Walther), not the spec's
-            nu_cSt = x * conv[1] / 1e-6
-            t = np.where(np.isfinite(temperature), temperature,
-                         temperature_of_viscosity(nu_cSt, oil.nu40_cSt, oil.nu100_cSt, xp=np))
-            mu = x * conv[1] * density(t, oil.density15_kg_m3, oil.expansion_per_K, xp=np)
+            mu = oil.dynamic_from_kinematic(x * conv[1], temperature)
         else:
             mu = x * conv
     gaps = ~np.isfinite(mu)
