@@ -150,13 +150,24 @@ def _real_maps():
         if not motor.exists():
             continue
         spec = load_motor_spec(motor)
-        for f in sorted(folder.glob("*.csv")):
-            if is_table(f):
+        tables = [f for f in sorted(folder.glob("*.csv")) if is_table(f)]
+        for f in tables:
+            import pandas as pd
+
+            head = pd.read_csv(f)
+            groups = next((head[c].astype(str).to_numpy() for c in GROUP_COLUMNS if c in head), None)
+            out.append((f"{folder.name}/{f.name}", read_table(f, spec), spec, groups))
+        if not tables:  # recordings without a shaft angle: the operating points motorid reduces them to
+            from motorid.identify.log_points import points_from_logs
+
+            reduced = points_from_logs([folder], spec)
+            if reduced is not None:
                 import pandas as pd
 
-                head = pd.read_csv(f)
-                groups = next((head[c].astype(str).to_numpy() for c in GROUP_COLUMNS if c in head), None)
-                out.append((f"{folder.name}/{f.name}", read_table(f, spec), spec, groups))
+                head = pd.read_csv(reduced.path)
+                groups = head["recording"].astype(str).to_numpy() if "recording" in head else None
+                out.append((f"{folder.name}/ (recordings → {len(head)} points by motorid fit)",
+                            read_table(reduced.path, spec), spec, groups))
     return out
 
 

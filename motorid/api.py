@@ -94,6 +94,7 @@ class FitResult:
         self.document = document
         self.spec = spec
         self.identification = identification
+        self.log_points = None  # LogPoints where the logs held no shaft angle (identify/log_points.py)
 
     @property
     def params(self) -> dict:
@@ -164,6 +165,8 @@ class FitResult:
 
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
+        if self.log_points is not None:  # logs without a shaft angle: their points go with the result
+            self.log_points.move_into(self.document, out)
         if getattr(self.identification, "bayes", None) is not None:  # a table fit has none
             write_chain(self.identification.bayes, out / CHAIN_FILE)
         return self.to_json(out / RESULT_FILE)
@@ -197,9 +200,20 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
     from motorid.io.tables import split_logs_and_tables
 
     log_paths, tables = split_logs_and_tables(logs, channels)
+    reduced = None
+    if not tables:  # logs without a shaft angle: their operating points (identify/log_points.py)
+        from motorid.identify.log_points import points_from_logs
+
+        reduced = points_from_logs(log_paths, spec, channels)
+        if reduced is not None:
+            tables, log_paths = [reduced.path], []
     if tables:  # operating-point tables, alone or with logs (identify/table_pipeline.py)
-        return _fit_tables(log_paths, tables, spec, harmonics, _mechanisms(mechanisms), channels,
-                           _motor_input(motor, motor_path), bayes)
+        result = _fit_tables(log_paths, tables, spec, harmonics, _mechanisms(mechanisms), channels,
+                             _motor_input(motor, motor_path), bayes)
+        if reduced is not None:
+            reduced.annotate(result.document, logs)
+            result.log_points = reduced
+        return result
     res = identify(logs, spec, bayes=bayes, options=FitOptions(harmonics=harmonics), seed=seed,
                    mechanisms=_mechanisms(mechanisms), channels=channels)
     inputs = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}
@@ -238,6 +252,7 @@ class DiagnosisResult:
         self.document = document
         self.arrays = arrays or {}
         self.diagnosis = diagnosis
+        self.log_points = None  # LogPoints where the logs held no shaft angle (identify/log_points.py)
 
     @property
     def mechanisms(self) -> list:
@@ -271,6 +286,8 @@ class DiagnosisResult:
 
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
+        if self.log_points is not None:
+            self.log_points.move_into(self.document, out)
         buf = io.BytesIO()
         np.savez_compressed(buf, **self.arrays)
         write_bytes_atomic(out / "diagnosis_residuals.npz", buf.getvalue())
@@ -289,6 +306,20 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
 
     spec = _spec(motor)
     logs = [logs] if isinstance(logs, (str, Path)) else list(logs)
+    from motorid.identify.log_points import points_from_logs
+
+    reduced = points_from_logs(logs, spec, channels)
+    if reduced is not None:  # no shaft angle: the logs' operating points, diagnosed as a table
+        from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
+        from motorid.io.tables import read_tables
+
+        dg = diagnose_table(read_tables([reduced.path], spec), spec, min_evidence=min_evidence, progress=progress)
+        doc = diagnosis_table_document(dg, spec)
+        doc["inputs"] = {"tables": [str(reduced.path)], "motor": _motor_input(motor, motor_path)}
+        reduced.annotate(doc, logs)
+        result = DiagnosisResult(doc, None, dg)
+        result.log_points = reduced
+        return result
     _, dataset = load_campaign(logs, spec, channels)
     dg = _diagnose(dataset, spec, alpha=alpha, min_evidence=min_evidence, progress=progress)
     doc = diagnosis_document(dg, spec)

@@ -34,6 +34,10 @@ def run(args) -> int:
     from motorid.io.tables import split_logs_and_tables
 
     logs, tables = split_logs_and_tables(args.logs, args.channels)
+    if not tables:  # logs without a shaft angle: fitted as their operating points (identify/log_points.py)
+        from motorid.cli.tables import reduce_angle_free_logs
+
+        logs, tables = reduce_angle_free_logs(args, logs, spec, out)
     if tables:  # operating-point tables (no time column): cli/tables.py
         from motorid.cli.tables import run_table_fit
 

@@ -17,6 +17,34 @@ from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
 from motorid.identify.table_pipeline import identify_tables, table_inputs, table_result_document
 
 
+def reduce_angle_free_logs(args, logs, spec, out: Path, say: bool = False) -> tuple[list, list]:
+    """Logs that hold no shaft angle → ([], [their operating points, a CSV in a temporary folder until the
+    command succeeds: :func:`place_points` moves it into ``out``]); other logs → (logs, [])."""
+    from motorid.identify.log_points import points_from_logs
+
+    if not logs:
+        return logs, []
+    reduced = points_from_logs(logs, spec, getattr(args, "channels", None))
+    if reduced is None:
+        return logs, []
+    if say:  # (a fit says it in its warnings)
+        print(reduced.summary())
+        for note in reduced.notes:
+            print(f"  {note}")
+    args.reduced_logs = list(logs)
+    args.log_points = reduced
+    return [], [reduced.path]
+
+
+def place_points(args, doc: dict, out: Path) -> None:
+    """Move the operating points of :func:`reduce_angle_free_logs` into ``out`` and say in ``doc`` where they
+    came from (:meth:`~motorid.identify.log_points.LogPoints.annotate`)."""
+    reduced = getattr(args, "log_points", None)
+    if reduced is not None:
+        reduced.move_into(doc, out)
+        reduced.annotate(doc, args.reduced_logs)
+
+
 def run_table_fit(args, logs, tables, spec) -> int:
     """The `motorid fit` command when tables are given."""
     from motorid.comparators.evaluate import compare
@@ -25,7 +53,7 @@ def run_table_fit(args, logs, tables, spec) -> int:
     from motorid.report.summary import format_fit as format_summary
 
     if getattr(args, "bayes", False):
-        raise InputError("--bayes is not available with operating-point tables (the least-squares covariance is "
+        raise InputError("--bayes is not available with operating-point tables, nor with logs fitted as their points (the least-squares covariance is "
                          "reported)")
     out = Path(args.out)
     check_output(out, args.force)
@@ -33,6 +61,7 @@ def run_table_fit(args, logs, tables, spec) -> int:
     comparison = compare(tf.table, spec) if len(tf.table) >= 10 else None
     inputs = table_inputs(logs, tables, str(args.motor), getattr(args, "channels", None))
     doc = table_result_document(tf, spec, inputs, comparison)
+    place_points(args, doc, out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / RESULT_FILE)
     print(format_summary(doc))
@@ -106,6 +135,7 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
                         progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
     doc = diagnosis_table_document(dg, spec)
     doc["inputs"] = table_inputs(logs, tables, str(args.motor), getattr(args, "channels", None))
+    place_points(args, doc, out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / "diagnosis.json")
     if not doc["mismatch"]:

@@ -59,18 +59,19 @@ _INPUT_WORDS = {"theta_rad": "a shaft angle", "speed_rad_s": "a speed", "p_a_Pa"
                 "viscosity_Pa_s": "an oil temperature or viscosity"}
 
 
-def steady_run(key, cols, settings, excluded, notes):
-    """Steady samples of one running run → (their positions in the run or None, direction, why not)."""
+def steady_run(key, cols, settings, excluded, notes, inputs=INPUT_CHANNELS):
+    """Steady samples of one running run → (their positions in the run or None, direction, why not).
+    inputs : the channels a sample needs (a run reduced to an operating point needs no shaft angle)."""
     n = cols["time_s"].size
     if n < settings.min_samples:
         excluded[SHORT_RUN] = excluded.get(SHORT_RUN, 0) + 1
         notes.append(f"run {key}: only {n} samples (at least {settings.min_samples} needed)")
         return None, 0.0, "too few samples"
-    valid = np.all([np.isfinite(cols[c]) for c in INPUT_CHANNELS], axis=0)
+    valid = np.all([np.isfinite(cols[c]) for c in inputs], axis=0)
     excluded[MISSING_INPUT] = excluded.get(MISSING_INPUT, 0) + int((~valid).sum())
     speed = cols["speed_rad_s"]
     if not valid.any():
-        lacking = [_INPUT_WORDS.get(c, c) for c in INPUT_CHANNELS if not np.isfinite(cols[c]).any()]
+        lacking = [_INPUT_WORDS.get(c, c) for c in inputs if not np.isfinite(cols[c]).any()]
         notes.append(f"run {key}: no sample holds every input the model needs"
                      + (f" (none holds {', '.join(lacking)})" if lacking else ""))
         return None, 0.0, "missing " + (", ".join(lacking) if lacking else "inputs")

@@ -269,7 +269,9 @@ def _map_columns(path: Path, fields: list):
             else:
                 raise InputError(f"{path}: columns '{other}' and '{name}' both give the {words}; keep one")
         found[key] = (j, unit)
-    missing = [k for k in ("time_s", "run_id", "protocol", *_REQUIRED[1:]) if k not in found]
+    # a bench without a shaft encoder: the angle column may be left out (its runs become operating
+    # points, identify/log_points.py), as an empty column may
+    missing = [k for k in ("time_s", "run_id", "protocol", *_REQUIRED[1:]) if k not in found and k != "theta_rad"]
     if missing:
         key = missing[0]
         if key in _BY_SI:

@@ -1,0 +1,365 @@
+"""Bench logs without a shaft angle → operating points (a bench with no shaft encoder).
+
+The 1992 model's torque and flow ripple, and the K_L(θ) harmonics, are functions of the
+shaft angle θ (MODEL.md, Eq. 1-7 and 29-37); their means over the shaft angle are not:
+T_p averages to D·ΔP/2π, the swept flow to D·ω/2π, the leakage to K_L0·(P − P_c)/μ.  A
+log that holds no shaft angle is therefore fitted as what its steady stretches are,
+operating points of the model averaged over θ (the operating-point table path,
+identify/tables.py), and K_L's harmonics are reported as not identifiable.
+
+A running run becomes
+
+* **one point** where its steady samples (:func:`motorid.identify.steady.steady_run`, the
+  same test as for a fit of samples) hold speed and ΔP within a narrow band: the mean of
+  every channel over them (many shaft revolutions: the ripple averages out), with the
+  count and each output's spread (``n_samples``, ``*_std_*``: the table's relative weights);
+* **quasi-steady points** where it is a recording of continuous motion (a wave-energy test
+  machine, a duty cycle): the samples that turn (|ω| ≥ :data:`MIN_SPEED_SHARE` of the
+  campaign's speed) and barely accelerate (|dω/dt| ≤ the campaign's speed per
+  :data:`ACCEL_TIME_S`) are binned in a (speed, ΔP) grid of :data:`GRID` cells over the
+  campaign's range, and a cell of :data:`MIN_DURATION_S` of samples or more is a point.
+
+A point whose means give power out at both the shaft and the ports (T·ω > 0 and
+ΔP·Q_A < 0) breaks the first law for a steady point and is left out with a note.
+Startability runs are left out: at rest the pressure torque depends on the angle the
+shaft stands at (the ripple), which the log does not hold.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from motorid.identify.steady import steady_run
+from motorid.identify.types import RUNNING_PROTOCOLS, STARTABILITY, ExtractSettings
+from motorid.robust import nanmedian
+
+#: the file the points are written to, in the output folder
+POINTS_FILE = "points_from_logs.csv"
+#: a steady run is one point where its steady samples' moving-median speed and ΔP stay within this
+#: share of their level (5-95 % range), else its samples are binned as a recording of motion
+STEADY_SPREAD = 0.10
+#: quasi-steady binning: cells per axis over the campaign's 99th-percentile |speed| and |ΔP|
+GRID = 12
+#: quasi-steady binning: samples turning at less than this share of the campaign's speed are left out
+MIN_SPEED_SHARE = 0.05
+#: quasi-steady binning: |dω/dt| at most the campaign's 99th-percentile |speed| per this many seconds
+ACCEL_TIME_S = 10.0
+#: quasi-steady binning: a cell needs samples of this many seconds in all (and 25 samples)
+MIN_DURATION_S = 0.5
+MIN_CELL_SAMPLES = 25
+#: the moving mean of the speed whose derivative is the acceleration [s]
+SMOOTH_S = 0.1
+
+_OUTPUTS = (("torque_Nm", "torque_Nm", 1.0), ("q_a_lpm", "q_a_m3_s", 6e4), ("q_b_lpm", "q_b_m3_s", 6e4),
+            ("q_case_lpm", "q_case_m3_s", 6e4))
+
+
+def logs_lack_shaft_angle(paths, channels=None) -> bool:
+    """Whether no log of ``paths`` holds a shaft angle, known without reading them whole: a channel
+    map (given, or beside a file) that lists ``shaft_angle_deg`` under ``absent``; a plain CSV whose
+    header has no shaft-angle column, or whose column is empty (its first rows, then the whole
+    column).  Any file that may hold one: False."""
+    from motorid.io.formats import find_channel_map, needs_foreign_reader
+    from motorid.io.channel_map import load_channel_map
+
+    files = _log_files(paths)
+    if not files:
+        return False
+    for p in files:
+        cmap_path = channels if channels is not None else find_channel_map(p)
+        if cmap_path is not None:
+            cmap = cmap_path if hasattr(cmap_path, "absent") else load_channel_map(cmap_path)
+            if "shaft_angle_deg" not in cmap.absent:
+                return False
+            continue
+        if needs_foreign_reader(p) or not _csv_lacks_angle(p):
+            return False
+    return True
+
+
+def _log_files(paths) -> list:
+    out = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            from motorid.io.formats import data_files_in
+
+            out += list(data_files_in(p))
+        elif p.exists():
+            out.append(p)
+    return out
+
+
+def _csv_lacks_angle(path: Path) -> bool:
+    from motorid.errors import InputError
+    from motorid.io.logs import _map_columns, _read_text, _split_header
+
+    try:
+        fields, delim, body, _ = _split_header(path, _read_text(path))
+        found, _ = _map_columns(path, fields)
+    except (InputError, OSError):
+        return False  # the log reader says what is wrong with it
+    if "theta_rad" not in found:
+        return True
+    import io
+
+    j = found["theta_rad"][0]
+    column = pd.read_csv(io.StringIO(body), sep=delim, header=None, usecols=[j], skipinitialspace=True,
+                         keep_default_na=True, na_values=["-", "--", "null", "NULL", "None", "none"])[j]
+    values = pd.to_numeric(column, errors="coerce")
+    return not np.isfinite(values.to_numpy(dtype=float)).any()
+
+
+def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings | None = None):
+    """The runs of a canonical SI log frame (:func:`motorid.io.logs.read_logs`) → (points in the
+    operating-point table format of BENCH_LOG_FORMAT.md as a DataFrame, notes in words).
+
+    Columns: ``point_id`` (the run, or ``run:k`` for a run's k-th quasi-steady cell), ``speed_rpm``,
+    ``p_a_bar``, ``p_b_bar``, ``p_case_bar``, the outputs the log holds (``torque_Nm``, ``q_a_lpm``,
+    ``q_b_lpm``, ``q_case_lpm``), ``oil_temp_C`` where measured, ``viscosity_mPas`` where a viscometer
+    gave it, ``n_samples`` and the outputs' ``*_std_*``; ``recording`` (the source file) where the
+    logs are several files; ``accel_rpm_s`` (the mean dω/dt, what inertia could add to the torque)
+    and ``source`` ("steady run" / "quasi-steady cell"), kept and ignored by the table reader.
+    """
+    from motorid.io.logs import TEMPERATURE_ASSUMED, VISCOSITY_FROM_OIL
+
+    settings = settings or ExtractSettings()
+    runs = frame["run"] if "run" in frame.columns else frame["run_id"]
+    codes, keys = pd.factorize(runs)
+    t_all = frame["time_s"].to_numpy(dtype=float)
+    order = np.lexsort((t_all, codes))
+    bounds = np.searchsorted(codes[order], np.arange(len(keys) + 1))
+    numeric = [c for c in ("time_s", "speed_rad_s", "p_a_Pa", "p_b_Pa", "p_case_Pa", "torque_Nm", "q_a_m3_s",
+                           "q_b_m3_s", "q_case_m3_s", "oil_temp_C", "viscosity_Pa_s", "theta_rad")
+               if c in frame.columns]
+    arrays = {c: frame[c].to_numpy(dtype=float) for c in numeric}
+    for flag in (TEMPERATURE_ASSUMED, VISCOSITY_FROM_OIL):
+        arrays[flag] = (frame[flag].to_numpy(dtype=bool) if flag in frame.columns
+                        else np.zeros(len(frame), bool))
+    notes = []
+    if not np.isfinite(arrays["p_case_Pa"]).any():  # no case transducer: 0 bar gauge, as in a table
+        arrays["p_case_Pa"] = np.zeros(len(frame))
+        notes.append("no case pressure in these logs: taken as 0 bar gauge (the leakage to the case follows "
+                     "P − P_c)")
+    protocols = frame["protocol"].astype(str).to_numpy()
+    files = frame["file"].astype(str).to_numpy() if "file" in frame.columns else np.full(len(frame), "")
+    several_files = len(set(files)) > 1
+    running = np.isin(protocols, RUNNING_PROTOCOLS)
+    speed_scale = float(np.nanquantile(np.abs(arrays["speed_rad_s"][running]), 0.99)) if running.any() else 0.0
+    dp_all = arrays["p_a_Pa"] - arrays["p_b_Pa"]
+    dp_scale = float(np.nanquantile(np.abs(dp_all[running]), 0.99)) if running.any() else 0.0
+    rows, excluded = [], {}
+    n_start = 0
+    for r, key in enumerate(keys):
+        pos = order[bounds[r]:bounds[r + 1]]
+        protocol = protocols[pos[0]]
+        if protocol == STARTABILITY:
+            n_start += 1
+            continue
+        if protocol not in RUNNING_PROTOCOLS:
+            continue
+        cols = {c: v[pos] for c, v in arrays.items()}
+        recording = Path(files[pos[0]]).name if several_files else None
+        quiet: list = []
+        chosen, _, why = steady_run(str(key), cols, settings, excluded, quiet,
+                                    inputs=("speed_rad_s", "p_a_Pa", "p_b_Pa", "p_case_Pa", "viscosity_Pa_s"))
+        if chosen is not None and _holds_still(cols, chosen):
+            rows.append(_point(str(key), cols, chosen, recording, "steady run"))
+            continue
+        cells = _quasi_steady_cells(cols, speed_scale, dp_scale)
+        if not cells:
+            notes.append(f"run {key}: no steady stretch and no quasi-steady cell (" + (why or "speed or ΔP moves "
+                         "through the run") + ")")
+        for k, idx in enumerate(cells, start=1):
+            rows.append(_point(f"{key}:{k}", cols, idx, recording, "quasi-steady cell"))
+    if n_start:
+        notes.append(f"{n_start} startability run(s) left out: at rest the pressure torque depends on the angle the "
+                     f"shaft stands at (the ripple), which these logs do not hold, so K_FS and K_s are not "
+                     f"identified")
+    points = pd.DataFrame(rows)
+    points.attrs["startability_runs"] = n_start
+    if points.empty:
+        return points, notes
+    drop = _first_law_breaches(points)
+    for pid in points.loc[drop, "point_id"]:
+        notes.append(f"point {pid} left out: its means give power out at both the shaft and the ports (first law; "
+                     f"a transient the reduction did not remove, or pressures read away from the ports)")
+    points = points.loc[~drop].reset_index(drop=True).dropna(axis=1, how="all")
+    points.attrs["startability_runs"] = n_start
+    return points, notes
+
+
+def _holds_still(cols: dict, chosen: np.ndarray) -> bool:
+    """Whether a run's steady samples hold speed and ΔP within :data:`STEADY_SPREAD` of their level."""
+    from motorid.robust import moving_median, odd_window
+
+    n = chosen.size
+    window = max(1, odd_window(min(max(5, n // 50), n)))
+    for x, floor in ((cols["speed_rad_s"][chosen], 0.5), ((cols["p_a_Pa"] - cols["p_b_Pa"])[chosen], 2e5)):
+        smooth = moving_median(x, window)
+        lo, hi = np.nanquantile(smooth, [0.05, 0.95])
+        if hi - lo > max(STEADY_SPREAD * abs(nanmedian(smooth)), floor):
+            return False
+    return True
+
+
+def _quasi_steady_cells(cols: dict, speed_scale: float, dp_scale: float) -> list:
+    """Index arrays of a run's quasi-steady cells (module docstring)."""
+    t = cols["time_s"]
+    if t.size < MIN_CELL_SAMPLES or speed_scale <= 0:
+        return []
+    step = float(np.median(np.diff(t))) if t.size > 1 else math.inf
+    w = max(3, int(round(SMOOTH_S / step)) | 1) if step > 0 else 3
+    speed = cols["speed_rad_s"]
+    filled = pd.Series(speed).interpolate(limit_direction="both").to_numpy()
+    smooth = pd.Series(filled).rolling(w, center=True, min_periods=1).mean().to_numpy()
+    accel = np.gradient(smooth, t)
+    dp = cols["p_a_Pa"] - cols["p_b_Pa"]
+    ok = (np.isfinite(speed) & np.isfinite(dp) & np.isfinite(cols["p_case_Pa"])
+          & np.isfinite(cols["viscosity_Pa_s"])
+          & (np.abs(speed) >= MIN_SPEED_SHARE * speed_scale) & (np.abs(accel) <= speed_scale / ACCEL_TIME_S))
+    if not ok.any():
+        return []
+    ds = speed_scale / GRID
+    dd = max(dp_scale / GRID, 1e5)
+    cell = np.floor(speed / ds) * 100003 + np.floor(dp / dd)
+    need = max(MIN_CELL_SAMPLES, int(math.ceil(MIN_DURATION_S / step)) if step > 0 else 0)
+    idx = np.flatnonzero(ok)
+    out = []
+    for c in np.unique(cell[idx]):
+        members = idx[cell[idx] == c]
+        if members.size >= need:
+            out.append(members)
+    return out
+
+
+def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str) -> dict:
+    """The means of one point's samples in the table format's units."""
+    def mean(x):
+        x = x[idx]
+        good = np.isfinite(x)
+        return float(x[good].mean()) if good.sum() >= max(2, 0.5 * idx.size) else math.nan
+
+    row = {"point_id": point_id}
+    if recording is not None:
+        row["recording"] = recording
+    row.update(speed_rpm=mean(cols["speed_rad_s"]) * 30.0 / math.pi, p_a_bar=mean(cols["p_a_Pa"]) / 1e5,
+               p_b_bar=mean(cols["p_b_Pa"]) / 1e5, p_case_bar=mean(cols["p_case_Pa"]) / 1e5)
+    for name, si, scale in _OUTPUTS:
+        if si in cols:
+            row[name] = mean(cols[si]) * scale
+    from motorid.io.logs import TEMPERATURE_ASSUMED, VISCOSITY_FROM_OIL
+
+    if not cols[TEMPERATURE_ASSUMED][idx].any():
+        row["oil_temp_C"] = mean(cols["oil_temp_C"])
+    if not cols[VISCOSITY_FROM_OIL][idx].any():
+        row["viscosity_mPas"] = mean(cols["viscosity_Pa_s"]) * 1e3
+    row["n_samples"] = int(idx.size)
+    for name, si, scale in _OUTPUTS:
+        if si in cols:
+            x = cols[si][idx]
+            x = x[np.isfinite(x)]
+            spread = float(np.std(x, ddof=1)) * scale if x.size >= 2 else math.nan
+            row[name.replace("_Nm", "_std_Nm").replace("_lpm", "_std_lpm")] = spread if spread > 0 else math.nan
+    t = cols["time_s"][idx]
+    if t.size >= 2 and np.ptp(t) > 0:
+        speed = cols["speed_rad_s"][idx]
+        good = np.isfinite(speed)
+        slope = np.polyfit(t[good], speed[good], 1)[0] if good.sum() >= 2 and source == "steady run" else math.nan
+        row["accel_rpm_s"] = float(slope) * 30.0 / math.pi if np.isfinite(slope) else math.nan
+    row["source"] = source
+    return row
+
+
+def _first_law_breaches(points: pd.DataFrame) -> np.ndarray:
+    """True where a point gives power out at both its shaft (T·ω > 0) and its ports (ΔP·Q_A < 0)."""
+    if "torque_Nm" not in points or "q_a_lpm" not in points:
+        return np.zeros(len(points), bool)
+    shaft_out = (points["torque_Nm"] * points["speed_rpm"] > 0).to_numpy()
+    ports_out = ((points["p_a_bar"] - points["p_b_bar"]) * points["q_a_lpm"] < 0).to_numpy()
+    return shaft_out & ports_out
+
+
+@dataclass
+class LogPoints:
+    """Logs reduced to operating points: the CSV written, and what the reduction did."""
+
+    path: Path
+    notes: list
+    steady_runs: int  # points that are a whole steady run
+    cells: int  # points that are a quasi-steady cell of a run in motion
+    startability_runs: int  # left out
+
+    def summary(self) -> str:
+        """One sentence for the user and for result.json's warnings."""
+        return (f"no shaft angle in these logs: fitted as {self.steady_runs + self.cells} operating points "
+                f"({self.steady_runs} steady runs, {self.cells} quasi-steady cells of runs in motion; "
+                f"identify/log_points.py), with the model averaged over the shaft angle")
+
+    def annotate(self, doc: dict, logs) -> None:
+        """Say in a result document (result.json, diagnosis.json) that its table is these logs' points:
+        ``inputs.reduced_logs``, the parameters' reasons, the first warning."""
+        doc.setdefault("inputs", {})["reduced_logs"] = [str(Path(p).resolve()) for p in logs]
+        reasons = self.reasons()
+        for name, entry in doc.get("parameters", {}).items():
+            why = reasons.get(name) or reasons.get(name.rstrip("0123456789"))
+            if why and not entry.get("identifiable", True):
+                entry["reason"] = why
+        fit = doc.get("fit")
+        if isinstance(fit, dict) and self.summary() not in fit.get("warnings", []):
+            fit["warnings"] = [self.summary(), *self.notes, *fit.get("warnings", [])]
+
+    def move_into(self, doc: dict, folder) -> None:
+        """Copy the points into ``folder`` (a result folder) and name that copy in ``doc``'s inputs."""
+        import shutil
+
+        folder = Path(folder)
+        source, target = Path(self.path).resolve(), (folder / POINTS_FILE).resolve()
+        if source != target:
+            folder.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(source, target)
+        inputs = doc.setdefault("inputs", {})
+        inputs["tables"] = [str(target) if Path(t).resolve() == source else t for t in inputs.get("tables", [])]
+
+    def reasons(self) -> dict:
+        """Why a parameter is not identified, in the words of these logs (replacing a table's)."""
+        out = {k: ("these logs hold no shaft angle: they are fitted as operating points (means over the shaft "
+                   "angle), and the K_L(θ) harmonics need flows recorded against it") for k in ("KL_a", "KL_b")}
+        if self.startability_runs:
+            for k in ("KFS", "Ks"):
+                out[k] = (f"{self.startability_runs} startability run(s) left out: at rest the pressure torque "
+                          f"depends on the angle the shaft stands at (the ripple), which these logs do not hold")
+        return out
+
+
+def points_from_logs(paths, spec, channels=None, folder=None) -> LogPoints | None:
+    """Where no log of ``paths`` holds a shaft angle: read them, reduce them to operating points,
+    write ``folder/`` :data:`POINTS_FILE` (a new temporary folder where ``folder`` is None) →
+    :class:`LogPoints`; None where a log may hold a shaft angle."""
+    from motorid.errors import InputError
+    from motorid.io.logs import read_logs
+
+    if not logs_lack_shaft_angle(paths, channels):
+        return None
+    frame = read_logs([str(p) for p in paths], spec, channels)
+    points, notes = operating_points(frame, spec)
+    if points.empty or not any(c in points for c in ("torque_Nm", "q_a_lpm", "q_b_lpm", "q_case_lpm")):
+        raise InputError("these logs hold no shaft angle, and no steady run or quasi-steady stretch of them gives an "
+                         "operating point: " + ("; ".join(notes[:3]) or "no running run"))
+    if folder is None:  # until a result is saved (LogPoints.move_into); gone when the process ends
+        import atexit
+        import shutil
+        import tempfile
+
+        folder = tempfile.mkdtemp(prefix="motorid-points-")
+        atexit.register(shutil.rmtree, folder, True)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / POINTS_FILE
+    points.to_csv(path, index=False, float_format="%.9g", lineterminator="\n")
+    steady = int((points["source"] == "steady run").sum())
+    return LogPoints(path, notes, steady, len(points) - steady, int(points.attrs.get("startability_runs", 0)))
