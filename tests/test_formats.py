@@ -792,3 +792,84 @@ def test_a_tdms_file_with_a_group_per_run_reads_every_group_as_a_run(campaign, t
     np.testing.assert_allclose(got["p_b_Pa"], raw["pB"][keep] * 1e6, rtol=1e-12)
     t0 = np.concatenate([raw["t"][run == r] - raw["t"][run == r][0] for r in np.unique(run)[:4]])
     np.testing.assert_allclose(got["time_s"], t0, atol=1e-6)
+
+
+def test_an_hdf5_file_with_a_group_per_run_and_its_protocol_as_an_attribute(campaign, tmp_path):
+    """A logger that writes each run as an HDF5 group, with the test it belongs to as the group's
+    attribute (h5py, as such loggers write it): [file] group = "runs/*" reads every group under /runs
+    as a run named after it, and [constants] protocol = {attribute = "test"} takes each group's
+    attribute; the oil temperature from the file's root attribute where a group has none."""
+    import h5py
+
+    _, raw, _ = campaign
+    run = raw["RunNo"]
+    path = tmp_path / "groups.h5"
+    with h5py.File(path, "w") as h5:
+        h5.attrs["oil_temperature"] = 41.5
+        for k, r in enumerate(np.unique(run)[:3]):
+            g = h5.create_group(f"runs/R{int(r):02d}")
+            g.attrs["test"] = np.bytes_("constant_speed" if k < 2 else "constant pressure")
+            sel = run == r
+            for name, v in raw.items():
+                if name not in ("RunNo", "Toil", "mu"):
+                    g.create_dataset(name, data=v[sel] - (raw["t"][sel][0] if name == "t" else 0.0))
+    text = (map_text(fmt_lines='[file]\ngroup = "runs/*"').replace('run_id = {name = "RunNo"}\n', "")
+            .replace('protocol = "constant_speed"', 'protocol = {attribute = "test"}\noil_temp_C = {attribute = '
+                     '"oil_temperature"}')
+            .replace('oil_temp_C = {name = "Toil", unit = "K"}\n', "")
+            .replace('viscosity_mPas = {name = "mu", unit = "mPa.s"}\n', ""))
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(text)
+    got = read_logs(path, load_motor_spec(MOTOR), channels=cmap)
+    names = list(pd.unique(got["run_id"].astype(str)))
+    assert names == [f"R{int(r):02d}" for r in np.unique(run)[:3]]
+    protocols = got.groupby(got["run_id"].astype(str), observed=True)["protocol"].first().astype(str)
+    assert protocols[names[0]] == "constant_speed" and protocols[names[2]] == "constant_pressure"
+    np.testing.assert_allclose(got["oil_temp_C"], 41.5)
+    keep = np.isin(run, np.unique(run)[:3])
+    np.testing.assert_allclose(got["p_b_Pa"], raw["pB"][keep] * 1e6, rtol=1e-12)
+    # an attribute the groups do not hold: one line naming the group and the attribute
+    cmap.write_text(text.replace('attribute = "test"', 'attribute = "mode"'))
+    with pytest.raises(InputError, match=r"group 'R\d+' has no attribute 'mode'"):
+        read_logs(path, load_motor_spec(MOTOR), channels=cmap)
+
+
+def test_a_tdms_file_property_gives_a_constant_and_a_csv_has_no_attributes(campaign, tmp_path):
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    _, raw, _ = campaign
+    sel = raw["RunNo"] == raw["RunNo"][0]
+    path = tmp_path / "one.tdms"
+    with TdmsWriter(str(path)) as w:
+        w.write_segment([RootObject(properties={"Test type": "constant_speed"}), GroupObject("Data")]
+                        + [ChannelObject("Data", k, v[sel]) for k, v in raw.items()])
+    text = map_text().replace('protocol = "constant_speed"', 'protocol = {attribute = "Test type"}')
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(text)
+    got = read_logs(path, load_motor_spec(MOTOR), channels=cmap)
+    assert (got["protocol"].astype(str) == "constant_speed").all() and len(got) == int(sel.sum())
+    csv = tmp_path / "one.csv"
+    pd.DataFrame({k: v[sel] for k, v in raw.items()}).to_csv(csv, index=False)
+    with pytest.raises(InputError, match="holds no attributes"):
+        read_logs(csv, load_motor_spec(MOTOR), channels=cmap)
+
+
+def test_a_matlab_char_matrix_reads_as_one_text_per_row(tmp_path):
+    """MATLAB v7.3 stores a char matrix (run names, one per row, padded) as uint16 codes with the axes
+    reversed: each row is one text, not the whole matrix run together."""
+    import h5py
+
+    from motorid.io.formats import open_source
+
+    names = ["run_01", "run_02", "run_10"]
+    codes = np.array([[ord(c) for c in n] for n in names], dtype=np.uint16)  # 3 × 6, as MATLAB holds it
+    path = tmp_path / "chars.mat"
+    with h5py.File(path, "w", userblock_size=512) as h5:
+        ds = h5.create_dataset("run", data=codes.T)
+        ds.attrs["MATLAB_class"] = np.bytes_("char")
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created by: motorid tests HDF5 schema 1.00 ."
+    with open(path, "r+b") as fh:
+        fh.write(header.ljust(116) + b"\0" * 8 + b"\x00\x02" + b"IM")
+    src = open_source(path)
+    assert list(src.get("run")) == names
+    src.close()

@@ -11,8 +11,10 @@ A running run becomes
 
 * **one point** where its steady samples (:func:`motorid.identify.steady.steady_run`, the
   same test as for a fit of samples) hold speed and ΔP within a narrow band: the mean of
-  every channel over them (many shaft revolutions: the ripple averages out), with the
-  count and each output's spread (``n_samples``, ``*_std_*``: the table's relative weights);
+  every channel over them, with the count and each output's spread (``n_samples``,
+  ``*_std_*``: the table's relative weights), the spread widened by what the sampling leaves
+  of the shaft-angle ripple in the mean (a rate in step with the pitch frequency sees it at a
+  few phases only: :func:`ripple_coverage`, :func:`ripple_bias`);
 * **quasi-steady points** where it is a recording of continuous motion (a wave-energy test
   machine, a duty cycle): the samples that turn (|ω| ≥ :data:`MIN_SPEED_SHARE` of the
   campaign's speed) and barely accelerate (|dω/dt| ≤ the campaign's speed per
@@ -168,7 +170,7 @@ def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings |
         chosen, _, why = steady_run(str(key), cols, settings, excluded, quiet,
                                     inputs=("speed_rad_s", "p_a_Pa", "p_b_Pa", "p_case_Pa", "viscosity_Pa_s"))
         if chosen is not None and _holds_still(cols, chosen):
-            rows.append(_point(str(key), cols, chosen, recording, "steady run"))
+            rows.append(_point(str(key), cols, chosen, recording, "steady run", spec))
             continue
         cells = _quasi_steady_cells(cols, speed_scale, dp_scale)
         if not cells:
@@ -237,8 +239,9 @@ def _quasi_steady_cells(cols: dict, speed_scale: float, dp_scale: float) -> list
     return out
 
 
-def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str) -> dict:
-    """The means of one point's samples in the table format's units."""
+def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str, spec=None) -> dict:
+    """The means of one point's samples in the table format's units, and their spreads (for a steady
+    run, widened by what its sampling leaves of the ripple in the mean: :func:`ripple_bias`)."""
     def mean(x):
         x = x[idx]
         good = np.isfinite(x)
@@ -249,9 +252,20 @@ def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str) -
         row["recording"] = recording
     row.update(speed_rpm=mean(cols["speed_rad_s"]) * 30.0 / math.pi, p_a_bar=mean(cols["p_a_Pa"]) / 1e5,
                p_b_bar=mean(cols["p_b_Pa"]) / 1e5, p_case_bar=mean(cols["p_case_Pa"]) / 1e5)
-    for name, si, scale in _OUTPUTS:
-        if si in cols:
-            row[name] = mean(cols[si]) * scale
+    outputs = {name: cols[si][idx] * scale for name, si, scale in _OUTPUTS if si in cols}
+    spreads = {}
+    for name, x in outputs.items():
+        good = np.isfinite(x)
+        row[name] = float(x[good].mean()) if good.sum() >= max(2, 0.5 * idx.size) else math.nan
+        spreads[name] = float(np.std(x[good], ddof=1)) if good.sum() >= 2 else math.nan
+    if spec is not None and source == "steady run":
+        # what the sampling leaves of the shaft-angle ripple in the mean: widened into the spread, so that
+        # spread/√n_samples is the point's standard error (the table's relative weight)
+        coverage = ripple_coverage(cols["time_s"][idx], cols["speed_rad_s"][idx], int(spec.pistons))
+        bias = ripple_bias(row, spreads, coverage, spec)
+        for name in spreads:
+            spreads[name] = math.sqrt(spreads[name] ** 2 + idx.size * bias[name] ** 2)
+        row["ripple_coverage"] = coverage
     from motorid.io.logs import TEMPERATURE_ASSUMED, VISCOSITY_FROM_OIL
 
     if not cols[TEMPERATURE_ASSUMED][idx].any():
@@ -259,12 +273,9 @@ def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str) -
     if not cols[VISCOSITY_FROM_OIL][idx].any():
         row["viscosity_mPas"] = mean(cols["viscosity_Pa_s"]) * 1e3
     row["n_samples"] = int(idx.size)
-    for name, si, scale in _OUTPUTS:
-        if si in cols:
-            x = cols[si][idx]
-            x = x[np.isfinite(x)]
-            spread = float(np.std(x, ddof=1)) * scale if x.size >= 2 else math.nan
-            row[name.replace("_Nm", "_std_Nm").replace("_lpm", "_std_lpm")] = spread if spread > 0 else math.nan
+    for name in outputs:
+        spread = spreads[name]
+        row[name.replace("_Nm", "_std_Nm").replace("_lpm", "_std_lpm")] = spread if spread > 0 else math.nan
     t = cols["time_s"][idx]
     if t.size >= 2 and np.ptp(t) > 0:
         speed = cols["speed_rad_s"][idx]
@@ -273,6 +284,73 @@ def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str) -
         row["accel_rpm_s"] = float(slope) * 30.0 / math.pi if np.isfinite(slope) else math.nan
     row["source"] = source
     return row
+
+
+#: the multiples of the piston-pitch order n whose ripple a steady run's sampling may not average out
+RIPPLE_MULTIPLES = 4
+#: the pitch frequency is taken as uncertain by this share (a speed sensor's gain error)
+RIPPLE_FREQUENCY_SPAN = 0.003
+#: where the leakage's own ripple (K_L(θ)'s harmonics) must be bounded without data: this share of it
+LEAK_RIPPLE_SHARE = 0.5
+
+
+def ripple_coverage(t, speed, pistons: int) -> float:
+    """How far the samples of a steady run are from seeing every phase of the shaft-angle ripple:
+    max over the orders k·n (k = 1 … :data:`RIPPLE_MULTIPLES`) and over the pitch frequency within
+    ±:data:`RIPPLE_FREQUENCY_SPAN` of |mean exp(i·k·n·φ)|, φ = ∫ω dt the angle up to a constant
+    (0: the ripple averages out of the mean; 1: every sample at one phase, the ripple reads as a
+    constant).  A run sampled in step with the pitch frequency (a rate that divides n·ω/2π) comes
+    out near 1."""
+    t, speed = np.asarray(t, float), np.asarray(speed, float)
+    good = np.isfinite(t) & np.isfinite(speed)
+    if pistons <= 0 or good.sum() < 2:
+        return 1.0
+    t, speed = t[good], speed[good]
+    phase = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))]) * pistons
+    turns = max(abs(phase[-1]) / (2 * np.pi), 1e-9)
+    step = 1.0 / (8.0 * RIPPLE_MULTIPLES * turns)
+    count = int(min(2 * math.ceil(RIPPLE_FREQUENCY_SPAN / step) + 1, 601))
+    factors = 1.0 + np.linspace(-RIPPLE_FREQUENCY_SPAN, RIPPLE_FREQUENCY_SPAN, max(count, 1))
+    k = np.arange(1, RIPPLE_MULTIPLES + 1)
+    worst = 0.0
+    for f in factors:
+        z = np.abs(np.mean(np.exp(1j * np.outer(k * f, phase)), axis=1))
+        worst = max(worst, float(z.max()))
+    return min(worst, 1.0)
+
+
+def _port_sum_ripple(pistons: int) -> float:
+    """Half the peak-to-peak of S(θ) = Σ cos θᵢ over the pistons facing one port, over its mean n/π."""
+    theta = np.linspace(0.0, 2 * np.pi / max(pistons, 1), 2001)
+    phases = theta[:, None] + 2 * np.pi * np.arange(pistons)[None, :] / pistons
+    c = np.cos(phases)
+    total = np.where(c > 0, c, 0.0).sum(axis=1)
+    return float((total.max() - total.min()) / 2 / (pistons / np.pi))
+
+
+def ripple_bias(row: dict, spreads: dict, coverage: float, spec) -> dict:
+    """The standard error a steady run's mean carries from the ripple its sampling leaves in it, per
+    output [the output's unit]: (R·D)/√2 with D the :func:`ripple_coverage` and R the ripple's
+    amplitude, √2 × the output's spread where the samples see the ripple (D ≤ 0.5), else at least
+    the 1992 model's own: the pressure torque's D·|ΔP|/2π × the port sum's ripple, the swept flow's
+    D·|ω|/2π × the same, and :data:`LEAK_RIPPLE_SHARE` of the case flow for K_L(θ)'s harmonics."""
+    n = int(spec.pistons)
+    a_s = _port_sum_ripple(n)
+    disp = float(spec.displacement)
+    dp = abs(row["p_a_bar"] - row["p_b_bar"]) * 1e5
+    w = abs(row["speed_rpm"]) * math.pi / 30.0
+    leak = abs(row.get("q_case_lpm", math.nan))
+    leak = 0.0 if not np.isfinite(leak) else leak
+    model = {"torque_Nm": disp * dp / (2 * math.pi) * a_s,
+             "q_a_lpm": disp * w / (2 * math.pi) * a_s * 6e4 + LEAK_RIPPLE_SHARE * leak,
+             "q_b_lpm": disp * w / (2 * math.pi) * a_s * 6e4 + LEAK_RIPPLE_SHARE * leak,
+             "q_case_lpm": LEAK_RIPPLE_SHARE * leak}
+    out = {}
+    for name, spread in spreads.items():
+        seen = math.sqrt(2.0) * spread if np.isfinite(spread) else 0.0
+        amplitude = seen if coverage <= 0.5 else max(seen, model.get(name, 0.0))
+        out[name] = amplitude * coverage / math.sqrt(2.0)
+    return out
 
 
 def _first_law_breaches(points: pd.DataFrame) -> np.ndarray:

@@ -129,6 +129,7 @@ class ChannelMap:
     path: str
     channels: dict = field(default_factory=dict)  # column → Channel
     constants: dict = field(default_factory=dict)  # column → value in the format unit / text
+    attributes: dict = field(default_factory=dict)  # column → the file's (or each run group's) attribute
     absent: tuple = ()
     extra: dict = field(default_factory=dict)  # output column → foreign channel name
     grid_axes: tuple = ()
@@ -189,6 +190,8 @@ class ChannelMap:
             columns["time_s"] = ((rows[0] if rows else 0) + np.arange(n, dtype=float)) / clock.rate_Hz
         for col, value in self.constants.items():
             columns[col] = np.full(n, value, dtype=object if isinstance(value, str) else float)
+        for col, attr in self.attributes.items():
+            columns[col] = self._attribute_column(source, file_label, col, attr, n)
         for col in self.absent:
             columns[col] = np.full(n, np.nan)
         if "run_id" not in columns and self.is_log and hasattr(source, "sample_groups"):
@@ -206,6 +209,26 @@ class ChannelMap:
             outputs = [self.output_column(c) for c in TABLE_OUTPUTS + EFFICIENCY_OUTPUTS if c in self.channels]
             frame = frame[frame[outputs].notna().any(axis=1)].reset_index(drop=True)
         return frame
+
+    def _attribute_column(self, source, file_label: str, col: str, attr: str, n: int) -> np.ndarray:
+        """A column from an attribute: each run group's (a group per run), else the file's."""
+        where = f"{file_label}: [constants] {col} = {{attribute = \"{attr}\"}}"
+        if hasattr(source, "sample_attribute"):
+            named = next(ch.name for ch in self.channels.values() if ch.rate_Hz is None)
+            values = source.sample_attribute(attr, named)
+        elif hasattr(source, "attribute"):
+            values = np.full(n, source.attribute(attr), dtype=object)
+        else:
+            raise InputError(f"{where}: this file type holds no attributes (HDF5 and TDMS do)")
+        if len(values) != n:
+            raise InputError(f"{where}: the groups' channels have {len(values)} samples, the file {n}")
+        if COLUMNS[col] == "text":
+            return _text(np.asarray([str(v).strip() for v in values], dtype=object))
+        try:
+            numbers = np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: '{values[0]}' is not a number") from None
+        return numbers  # in the column's own unit, as a constant
 
     def _runs_by_time(self, stem: str, t: np.ndarray, rows) -> np.ndarray:
         """Run names for a file that maps no run column: a new run wherever the time track starts
@@ -512,6 +535,13 @@ def parse_channel_map(doc: dict, path: str) -> ChannelMap:
             raise InputError(f"{where}: unknown column (one of {', '.join(COLUMNS)})")
         if column in cmap.channels:
             raise InputError(f"{where}: also mapped in [channels]; keep one")
+        if isinstance(value, dict):  # {attribute = "name"}: the file's attribute, or each run group's
+            _check_keys(where, value, {"attribute"})
+            name = value.get("attribute")
+            if not isinstance(name, str) or not name.strip():
+                raise InputError(f"{where}: attribute: expected the attribute's name, got {name!r}")
+            cmap.attributes[column] = name.strip()
+            continue
         if COLUMNS[column] == "text":
             if not isinstance(value, (str, int)) or isinstance(value, bool) or str(value).strip() == "":
                 raise InputError(f"{where}: expected a name, got {value!r}")
@@ -529,7 +559,7 @@ def parse_channel_map(doc: dict, path: str) -> ChannelMap:
     for column in absent:
         if column not in COLUMNS or COLUMNS[column] == "text":
             raise InputError(f"{path}: absent: unknown sensor column '{column}'")
-        if column in cmap.channels or column in cmap.constants:
+        if column in cmap.channels or column in cmap.constants or column in cmap.attributes:
             raise InputError(f"{path}: absent: '{column}' is also mapped; keep one")
     cmap.absent = tuple(absent)
 
@@ -566,7 +596,7 @@ def parse_channel_map(doc: dict, path: str) -> ChannelMap:
 
 
 def _check_complete(cmap: ChannelMap):
-    given = set(cmap.channels) | set(cmap.constants) | set(cmap.absent)
+    given = set(cmap.channels) | set(cmap.constants) | set(cmap.absent) | set(cmap.attributes)
     only_logs = [c for c in ("protocol", "shaft_angle_deg") if c in cmap.channels]
     if not cmap.is_log and only_logs:
         raise InputError(f"{cmap.path}: [channels] maps {', '.join(only_logs)}, which only a time series has, but "

@@ -315,6 +315,8 @@ class _H5:
         if self.matlab:
             value = np.asarray(value).T
             if obj.attrs.get("MATLAB_class", b"") in (b"char", "char"):
+                if value.ndim == 2 and min(value.shape) > 1:  # a char matrix: one text per row (run names)
+                    return np.array(["".join(map(chr, row)).rstrip("\x00 ") for row in value], dtype=object)
                 return np.array("".join(map(chr, np.ravel(value))))
         value = np.asarray(value)
         if value.dtype.kind == "S":
@@ -324,8 +326,91 @@ class _H5:
     def table(self):
         return _columns_of(self.path, {n: self.get(n) for n in self.names()})
 
+    def attribute(self, name: str):
+        """An attribute of the group read (``[file] group``), else of the file's root."""
+        for where in ([self.file[self.group]] if self.group and self.group in self.file else []) + [self.file]:
+            if name in where.attrs:
+                return _attribute_value(where.attrs[name])
+        raise InputError(f"{self.path}: no attribute '{name}' on "
+                         + (f"group '{self.group}' or " if self.group else "") + "the file's root (it has "
+                         + (", ".join(sorted(self.file.attrs)) or "none") + ")")
+
     def close(self):
         self.file.close()
+
+
+def _attribute_value(value):
+    """An HDF5 attribute or TDMS property → a plain number or text."""
+    value = np.asarray(value)
+    if value.size == 1:
+        value = value.reshape(()).item()
+    if isinstance(value, bytes):
+        value = value.decode("utf-8", "replace")
+    return value
+
+
+class _H5Groups:
+    """Every group under one parent of an HDF5 file, one after another ([file] group = "*" for the root's
+    groups, "runs/*" for those under /runs): a channel is its dataset in each group, :meth:`sample_groups`
+    the group of each sample (the run of a map that maps no run column), :meth:`sample_attribute` an
+    attribute of each sample's group.  Read whole (no blocks)."""
+
+    def __init__(self, path: Path, parent: str):
+        import h5py
+
+        self.path, self.file = path, h5py.File(path, "r")
+        top = self.file[parent] if parent else self.file
+        if parent and not isinstance(top, h5py.Group):
+            self.file.close()
+            raise InputError(f"{path}: no group '{parent}' ([file] group = \"{parent}/*\")")
+        self.groups = [(k, top[k]) for k in top if isinstance(top[k], h5py.Group)]
+        if not self.groups:
+            self.file.close()
+            raise InputError(f"{path}: no group under '/{parent}' to read as runs ([file] group)")
+        self._h5py = h5py
+
+    def close(self):
+        self.file.close()
+
+    def names(self):
+        return [k for k in self.groups[0][1] if isinstance(self.groups[0][1][k], self._h5py.Dataset)]
+
+    def _datasets(self, name: str):
+        out = []
+        for g, grp in self.groups:
+            ds = grp.get(name.strip().lstrip("/"))
+            if not isinstance(ds, self._h5py.Dataset):
+                raise InputError(f"{self.path}: group '{g}' has no dataset '{name}' (group = \"*\" reads every "
+                                 f"group as a run; each must hold the mapped channels)")
+            out.append(ds)
+        return out
+
+    def get(self, name: str):
+        parts = []
+        for ds in self._datasets(name):
+            v = np.ravel(np.asarray(ds[()]))
+            parts.append(v.astype(str) if v.dtype.kind == "S" else v)
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    def sample_groups(self, name: str) -> np.ndarray:
+        """The group name of every sample of channel ``name`` (from the datasets' sizes)."""
+        return np.concatenate([np.full(ds.size, g, dtype=object)
+                               for (g, _), ds in zip(self.groups, self._datasets(name))])
+
+    def sample_attribute(self, attr: str, name: str) -> np.ndarray:
+        """The attribute ``attr`` of each sample's group (of the file's root where a group has none)."""
+        out = []
+        for (g, grp), ds in zip(self.groups, self._datasets(name)):
+            where = grp if attr in grp.attrs else self.file if attr in self.file.attrs else None
+            if where is None:
+                raise InputError(f"{self.path}: group '{g}' has no attribute '{attr}' (it has "
+                                 f"{', '.join(sorted(grp.attrs)) or 'none'})")
+            value = _attribute_value(where.attrs[attr])
+            out.append(np.full(ds.size, value, dtype=object))
+        return np.concatenate(out)
+
+    def table(self):
+        return _columns_of(self.path, {n: self.get(n) for n in self.names()})
 
 
 def _columns_of(path, arrays: dict) -> pd.DataFrame:
@@ -432,6 +517,15 @@ def _tdms(path: Path, group: str | None, stream: bool = False):
             if stream:
                 tdms.close()
 
+        def attribute(self, name: str):
+            """A property of the group read ([file] group), else of the file."""
+            chosen = [g for g in tdms.groups() if g.name == group] if group else []
+            for props in [g.properties for g in chosen] + [tdms.properties]:
+                if name in props:
+                    return _attribute_value(props[name])
+            raise InputError(f"{path}: no property '{name}' on " + (f"group '{group}' or " if group else "")
+                             + "the file (it has " + (", ".join(sorted(tdms.properties)) or "none") + ")")
+
         def table(self):
             groups = [tdms[group]] if group else tdms.groups()
             if len(groups) != 1:
@@ -493,6 +587,18 @@ class _TdmsGroups:
         base = name[:-5] if name.endswith("@time") else name
         return np.concatenate([np.full(len(ch), g.name, dtype=object)
                                for g, ch in zip(self.groups, self._channels(base))])
+
+    def sample_attribute(self, attr: str, name: str) -> np.ndarray:
+        """The property ``attr`` of each sample's group (of the file where a group has none)."""
+        base = name[:-5] if name.endswith("@time") else name
+        out = []
+        for g, ch in zip(self.groups, self._channels(base)):
+            props = g.properties if attr in g.properties else self.tdms.properties
+            if attr not in props:
+                raise InputError(f"{self.path}: group '{g.name}' has no property '{attr}' (it has "
+                                 f"{', '.join(sorted(g.properties)) or 'none'})")
+            out.append(np.full(len(ch), _attribute_value(props[attr]), dtype=object))
+        return np.concatenate(out)
 
     def table(self):
         return _columns_of(self.path, {n: self.get(n) for n in self.names()})
@@ -573,6 +679,9 @@ def open_source(path, cmap=None, stream: bool = False):
         if fmt == "mdf":
             return _mdf(path)
         if fmt == "hdf5":
+            group = str(options.get("group") or "")
+            if group == "*" or group.endswith("/*"):  # a group per run
+                return _H5Groups(path, group[:-1].strip("/"))
             return _H5(path, options.get("group"), matlab=False)
         if fmt == "mat":
             import h5py
