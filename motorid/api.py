@@ -206,7 +206,7 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
 
         reduced = points_from_logs(log_paths, spec, channels)
         if reduced is not None:
-            tables, log_paths = [reduced.path], []
+            tables, log_paths = [reduced.path], reduced.logs_for_breakaways(log_paths)
     if tables:  # operating-point tables, alone or with logs (identify/table_pipeline.py)
         result = _fit_tables(log_paths, tables, spec, harmonics, _mechanisms(mechanisms), channels,
                              _motor_input(motor, motor_path), bayes)
@@ -313,7 +313,15 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
         from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
         from motorid.io.tables import read_tables
 
-        dg = diagnose_table(read_tables([reduced.path], spec), spec, min_evidence=min_evidence, progress=progress)
+        dataset = log_fit = None
+        breakaways = reduced.logs_for_breakaways(logs)
+        if breakaways:
+            from motorid.identify.least_squares import fit_least_squares
+
+            _, dataset = load_campaign(breakaways, spec, channels)
+            log_fit = fit_least_squares(dataset, spec)
+        dg = diagnose_table(read_tables([reduced.path], spec), spec, min_evidence=min_evidence, progress=progress,
+                            dataset=dataset, log_fit=log_fit)
         doc = diagnosis_table_document(dg, spec)
         doc["inputs"] = {"tables": [str(reduced.path)], "motor": _motor_input(motor, motor_path)}
         reduced.annotate(doc, logs)

@@ -33,7 +33,7 @@ def reduce_angle_free_logs(args, logs, spec, out: Path, say: bool = False) -> tu
             print(f"  {note}")
     args.reduced_logs = list(logs)
     args.log_points = reduced
-    return [], [reduced.path]
+    return reduced.logs_for_breakaways(logs), [reduced.path]
 
 
 def place_points(args, doc: dict, out: Path) -> None:

@@ -135,8 +135,9 @@ def place_limited_onsets(events: list, pending: list) -> int:
     return placed
 
 
-def startability_event(key, cols, settings, excluded, notes):
-    """Breakaway event of one startability run → (dict of the event or None, why not)."""
+def startability_event(key, cols, settings, excluded, notes, theta=None):
+    """Breakaway event of one startability run → (dict of the event or None, why not).
+    theta : the shaft angle to take where the run logged none [rad] (None: such a run has no event)."""
     t = cols["time_s"]
     if t.size < settings.min_samples:
         excluded[SHORT_RUN] = excluded.get(SHORT_RUN, 0) + 1
@@ -164,6 +165,8 @@ def startability_event(key, cols, settings, excluded, notes):
         notes.append(f"run {key}: no breakaway found, {exc}")
         return None, "no breakaway found"
     event = _event_at(t, cols, b.onset_time, b.direction)
+    if theta is not None and not math.isfinite(event["theta_rad"]):
+        event["theta_rad"] = float(theta)
     event["acceleration"], event["breakaway"] = b.acceleration, b
     if not math.isfinite(event["held"]):
         excluded[NO_HELD_TORQUE] = excluded.get(NO_HELD_TORQUE, 0) + 1

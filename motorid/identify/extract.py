@@ -98,6 +98,8 @@ class _Gathered:
     events: list = field(default_factory=list)
     pending: list = field(default_factory=list)  # (event, columns) of onsets on a speed limit
     angle_ratios: list = field(default_factory=list)  # (run, shaft-angle rate / logged speed)
+    theta_mean_torque: float = math.nan  # an angle where the pressure torque equals its mean over θ
+    theta_assumed: list = field(default_factory=list)  # startability runs with no shaft angle
 
     def __post_init__(self):
         self.visc_center, self.visc_half = np.zeros(self.n_runs), np.ones(self.n_runs)
@@ -115,7 +117,11 @@ class _Gathered:
 
 
 def _add_startability(g: _Gathered, r: int, key, cols, row: dict, settings) -> None:
-    event, why = startability_event(key, cols, settings, g.excluded, g.notes)
+    if not np.isfinite(cols["theta_rad"]).any() and np.isfinite(g.theta_mean_torque):
+        g.theta_assumed.append(key)  # no shaft angle: the pressure torque's mean over θ (extract module doc)
+        event, why = startability_event(key, cols, settings, g.excluded, g.notes, theta=g.theta_mean_torque)
+    else:
+        event, why = startability_event(key, cols, settings, g.excluded, g.notes)
     row["excluded"] = why
     if event is not None:
         event["run"], event["run_index"] = key, r
@@ -291,7 +297,8 @@ def extract(frame: pd.DataFrame, spec: MotorSpec, settings: ExtractSettings | No
     _check_frame(frame)
     _check_spec(spec)
     index = _Runs(frame)
-    g = _Gathered(len(index.keys), accel_orders=_accel_orders(settings, spec))
+    g = _Gathered(len(index.keys), accel_orders=_accel_orders(settings, spec),
+                  theta_mean_torque=mean_torque_angle(int(spec.pistons)))
     for r, key in enumerate(index.keys):
         pos, cols, protocol, file = index.run(r)
         _extract_run(g, r, key, pos, cols, protocol, file, settings)
@@ -316,9 +323,34 @@ def _extract_run(g: _Gathered, r: int, key, pos, cols, protocol, file, settings,
     g.rows.append(row)
 
 
+def mean_torque_angle(pistons: int) -> float:
+    """A shaft angle θ* where the port sum S(θ) = Σ_{cos θᵢ > 0} cos θᵢ equals its mean n/π over the
+    angle (MODEL.md Eq. 1-7: there the pressure torque is D·ΔP/2π, its mean) [rad]."""
+    if pistons < 2:
+        return math.nan
+    theta = np.linspace(0.0, 2 * np.pi / pistons, 4001)
+    c = np.cos(theta[:, None] + 2 * np.pi * np.arange(pistons)[None, :] / pistons)
+    s = np.where(c > 0, c, 0.0).sum(axis=1) - pistons / np.pi
+    cross = np.flatnonzero(np.sign(s[1:]) != np.sign(s[:-1]))
+    if not cross.size:
+        return float(theta[np.argmin(np.abs(s))])
+    i = int(cross[0])
+    return float(theta[i] - s[i] * (theta[i + 1] - theta[i]) / (s[i + 1] - s[i]))
+
+
+def _note_assumed_angle(g: _Gathered) -> None:
+    """Say where startability runs had no shaft angle (their breakaways taken at θ*)."""
+    used = [e for e in g.events if e["run"] in set(g.theta_assumed)]
+    if used:
+        g.notes.append(f"{len(used)} breakaway(s) without a shaft angle: the pressure torque is taken at its mean over "
+                       f"the angle (D·ΔP/2π); the ripple about it, which these logs cannot place, widens the "
+                       f"breakaway channel's noise (K_FS and K_s carry it in their std)")
+
+
 def _finish(spec, g: _Gathered, running_samples, cells=None) -> Dataset:
     """The gathered runs → :class:`Dataset` (``running_samples(runs)`` gives its running part)."""
     _check_angle_rate(g)
+    _note_assumed_angle(g)
     place_limited_onsets(g.events, g.pending)
     for e in g.events:
         g.rows[e["run_index"]]["onset_time_s"] = e["onset"]
@@ -351,7 +383,7 @@ def extract_cells(runs, spec: MotorSpec, settings: ExtractSettings | None = None
 
     settings = settings or ExtractSettings()
     _check_spec(spec)
-    g = _Gathered(0, accel_orders=_accel_orders(settings, spec))
+    g = _Gathered(0, accel_orders=_accel_orders(settings, spec), theta_mean_torque=mean_torque_angle(int(spec.pistons)))
     cells = CellReducer(spec, bins_per_pitch, outlier_sigma)
     with bar(desc="extracting", unit="run", progress=progress) as pbar:
         for r, run in enumerate(runs):

@@ -59,11 +59,13 @@ def tfc_carries_kf_warning(reasons: dict, free, data: str, more: str) -> str | N
             f"there (K_F not identifiable, held at its start value); {more} at a second pressure tell them apart")
 
 
-def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
+def coverage_reasons(data, spec, names: Sequence[str], elsewhere: Sequence[str] = ()) -> dict:
     """Reasons why the logs cannot identify a parameter, from what data exist.
 
     Returns name -> reason for parameters that lack the data they need
-    (MODEL.md, "What the bench can identify").
+    (MODEL.md, "What the bench can identify").  elsewhere : parameters that other data fitted jointly
+    determine (a table's running points give K_F and T_Fc, against which the logs' breakaways
+    measure the static friction).
     """
     reasons = {}
     s = data.running
@@ -92,7 +94,7 @@ def coverage_reasons(data, spec, names: Sequence[str]) -> dict:
         reasons["KFS"] = msg
         reasons["Ks"] = msg
     for k in ("KFS", "Ks"):
-        if k not in reasons and ("KF" in reasons or "TFc" in reasons):
+        if k not in reasons and any(j in reasons and j not in elsewhere for j in ("KF", "TFc")):
             reasons[k] = "static friction is measured relative to K_F and T_Fc, which these logs do not determine"
     flows = {c: _has(m[c]) if n_run else np.zeros(0, bool) for c in ("q_a", "q_b", "q_case")}
     case_info = flows["q_case"] | (flows["q_a"] & flows["q_b"])

@@ -23,8 +23,9 @@ A running run becomes
 
 A point whose means give power out at both the shaft and the ports (T·ω > 0 and
 ΔP·Q_A < 0) breaks the first law for a steady point and is left out with a note.
-Startability runs are left out: at rest the pressure torque depends on the angle the
-shaft stands at (the ripple), which the log does not hold.
+Startability runs stay with the log fit, which takes their breakaways at the pressure torque's
+mean over the angle (identify/extract.py, ``mean_torque_angle``); the points and the
+breakaways are fitted jointly.
 """
 
 from __future__ import annotations
@@ -178,10 +179,6 @@ def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings |
                          "through the run") + ")")
         for k, idx in enumerate(cells, start=1):
             rows.append(_point(f"{key}:{k}", cols, idx, recording, "quasi-steady cell"))
-    if n_start:
-        notes.append(f"{n_start} startability run(s) left out: at rest the pressure torque depends on the angle the "
-                     f"shaft stands at (the ripple), which these logs do not hold, so K_FS and K_s are not "
-                     f"identified")
     points = pd.DataFrame(rows)
     points.attrs["startability_runs"] = n_start
     if points.empty:
@@ -376,7 +373,15 @@ class LogPoints:
         """One sentence for the user and for result.json's warnings."""
         return (f"no shaft angle in these logs: fitted as {self.steady_runs + self.cells} operating points "
                 f"({self.steady_runs} steady runs, {self.cells} quasi-steady cells of runs in motion; "
-                f"identify/log_points.py), with the model averaged over the shaft angle")
+                f"identify/log_points.py), with the model averaged over the shaft angle"
+                + (f", jointly with the breakaways of their {self.startability_runs} startability run(s) (the "
+                   f"pressure torque at rest taken at its mean over the angle: the ripple about it widens the "
+                   f"breakaway channel's noise)" if self.startability_runs else ""))
+
+    def logs_for_breakaways(self, logs) -> list:
+        """The logs to fit jointly with the points: the same logs where they hold startability runs (the
+        log fit takes their breakaways; their running runs, without an angle, it leaves out), else none."""
+        return list(logs) if self.startability_runs else []
 
     def annotate(self, doc: dict, logs) -> None:
         """Say in a result document (result.json, diagnosis.json) that its table is these logs' points:
@@ -407,10 +412,6 @@ class LogPoints:
         """Why a parameter is not identified, in the words of these logs (replacing a table's)."""
         out = {k: ("these logs hold no shaft angle: they are fitted as operating points (means over the shaft "
                    "angle), and the K_L(θ) harmonics need flows recorded against it") for k in ("KL_a", "KL_b")}
-        if self.startability_runs:
-            for k in ("KFS", "Ks"):
-                out[k] = (f"{self.startability_runs} startability run(s) left out: at rest the pressure torque "
-                          f"depends on the angle the shaft stands at (the ripple), which these logs do not hold")
         return out
 
 

@@ -333,7 +333,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         names += list(mech.parameters)
     reasons = table_coverage_reasons(table, spec, names)
     if dataset is not None:
-        from_logs = coverage_reasons(dataset, spec, names)
+        from_logs = coverage_reasons(dataset, spec, names, elsewhere=[k for k in names if k not in reasons])
         reasons = {k: f"{v}; and from the logs: {from_logs[k]}" for k, v in reasons.items() if k in from_logs}
     n = len(table)
     train = np.ones(n, bool) if train is None else np.asarray(train, bool)
