@@ -201,9 +201,9 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
 
     log_paths, tables = split_logs_and_tables(logs, channels)
     reduced = None
-    if not tables:  # logs without a shaft angle: their operating points (identify/log_points.py)
-        from motorid.identify.log_points import points_from_logs
+    from motorid.identify.log_points import points_from_logs
 
+    if not tables:  # logs without a shaft angle: their operating points (identify/log_points.py)
         reduced = points_from_logs(log_paths, spec, channels)
         if reduced is not None:
             tables, log_paths = [reduced.path], reduced.logs_for_breakaways(log_paths)
@@ -216,6 +216,18 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
         return result
     res = identify(logs, spec, bayes=bayes, options=FitOptions(harmonics=harmonics), seed=seed,
                    mechanisms=_mechanisms(mechanisms), channels=channels)
+    from motorid.identify.log_points import angle_missing_everywhere, mixed_angle_warning
+
+    if angle_missing_everywhere(res.dataset):  # an empty angle channel the header did not tell
+        reduced = points_from_logs(log_paths, spec, channels, known=True)
+        result = _fit_tables(reduced.logs_for_breakaways(log_paths), [reduced.path], spec, harmonics,
+                             _mechanisms(mechanisms), channels, _motor_input(motor, motor_path), bayes)
+        reduced.annotate(result.document, logs)
+        result.log_points = reduced
+        return result
+    note = mixed_angle_warning(res.dataset)
+    if note:
+        res.ls.warnings.append(note)
     inputs = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}
     if channels is not None:
         inputs["channels"] = str(channels)
@@ -306,9 +318,14 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
 
     spec = _spec(motor)
     logs = [logs] if isinstance(logs, (str, Path)) else list(logs)
-    from motorid.identify.log_points import points_from_logs
+    from motorid.identify.log_points import angle_missing_everywhere, points_from_logs
 
     reduced = points_from_logs(logs, spec, channels)
+    frame = dataset = None
+    if reduced is None:
+        frame, dataset = load_campaign(logs, spec, channels)
+        if angle_missing_everywhere(dataset):  # an empty angle channel the header did not tell
+            reduced = points_from_logs(logs, spec, channels, known=True)
     if reduced is not None:  # no shaft angle: the logs' operating points, diagnosed as a table
         from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
         from motorid.io.tables import read_tables
@@ -328,7 +345,6 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
         result = DiagnosisResult(doc, None, dg)
         result.log_points = reduced
         return result
-    _, dataset = load_campaign(logs, spec, channels)
     dg = _diagnose(dataset, spec, alpha=alpha, min_evidence=min_evidence, progress=progress)
     doc = diagnosis_document(dg, spec)
     doc["inputs"] = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}

@@ -867,9 +867,15 @@ def test_a_matlab_char_matrix_reads_as_one_text_per_row(tmp_path):
     with h5py.File(path, "w", userblock_size=512) as h5:
         ds = h5.create_dataset("run", data=codes.T)
         ds.attrs["MATLAB_class"] = np.bytes_("char")
+        one = h5.create_dataset("single", data=np.array([[ord(c) for c in "abc"]], dtype=np.uint16).T)  # 'abc'
+        one.attrs["MATLAB_class"] = np.bytes_("char")
+        col = h5.create_dataset("letters", data=np.array([[ord("x")], [ord("y")]], dtype=np.uint16).T)  # 2 × 1
+        col.attrs["MATLAB_class"] = np.bytes_("char")
     header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created by: motorid tests HDF5 schema 1.00 ."
     with open(path, "r+b") as fh:
         fh.write(header.ljust(116) + b"\0" * 8 + b"\x00\x02" + b"IM")
     src = open_source(path)
     assert list(src.get("run")) == names
+    assert str(src.get("single")) == "abc"  # a row of chars is one text
+    assert list(src.get("letters")) == ["x", "y"]  # a column of chars: one text per row
     src.close()

@@ -217,3 +217,40 @@ def test_diagnose_on_logs_without_angle_names_what_is_there_and_nothing_on_a_cle
     doc = json.loads((out / "diagnosis.json").read_text())
     assert [m["id"] for m in doc["mechanisms"]] == named
     assert (out / "points_from_logs.csv").exists() and (out / "result.json").exists()
+
+
+def test_a_parquet_log_without_angle_takes_the_points_path_and_a_mixed_campaign_warns(tmp_path):
+    """The cheap test reads CSV headers only: a Parquet log without the angle column is found out
+    from the extracted runs (every running run left out for its missing angle) and fitted as its
+    points, where it gave exit 0 with nothing identified.  A campaign where some logs hold an angle
+    and others none is fitted from the first, with a warning naming the runs left out."""
+    import motorid
+
+    frame = pd.read_csv(DEMO / "campaign.csv.gz")
+    pq = tmp_path / "c.parquet"
+    frame.drop(columns=["shaft_angle_deg"]).to_parquet(pq)
+    fit = motorid.fit([pq], DEMO / "motor.toml")
+    assert fit.log_points is not None and fit.document["parameters"]["Kv"]["identifiable"]
+    fit.save(tmp_path / "out")
+    assert (tmp_path / "out" / "points_from_logs.csv").exists()
+    runs = frame["run_id"].unique()
+    half = set(runs[::2])
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    frame[frame["run_id"].isin(half)].to_csv(a, index=False)
+    frame[~frame["run_id"].isin(half)].assign(shaft_angle_deg=np.nan).to_csv(b, index=False)
+    mixed = motorid.fit([a, b], DEMO / "motor.toml")
+    assert mixed.log_points is None
+    assert any("hold no shaft angle and are left out" in w for w in mixed.warnings)
+
+
+def test_a_refusal_of_the_points_names_the_logs_not_a_temporary_file(tmp_path):
+    """A pump-sign log read as a motor's: the ideal-machine check refuses the points, naming the log."""
+    frame = pd.read_csv(DEMO / "campaign.csv.gz").drop(columns=["shaft_angle_deg"])
+    frame["torque_Nm"] = -frame["torque_Nm"]
+    log = tmp_path / "pumpsign.csv"
+    frame.to_csv(log, index=False)
+    proc = _motorid("fit", log, "--motor", DEMO / "motor.toml", "--out", tmp_path / "o")
+    assert proc.returncode == 2
+    line = proc.stderr.strip().splitlines()[-1]
+    assert "pumpsign.csv" in line and "motorid-points-" not in line, line
+    assert not (tmp_path / "o").exists()

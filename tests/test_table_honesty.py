@@ -73,7 +73,12 @@ def test_a_flow_meter_error_is_named_on_a_table_only_where_the_meters_mass_balan
     offset, gain = get("flow_meter_offset_case"), get("flow_meter_gain_a")
     clean = _table(spec, df, tmp_path / "clean.csv")
     assert "mass balance" in offset.unseen_in_table(clean) and "mass balance" in gain.unseen_in_table(clean)
-    assert get("torque_meter_gain").unseen_in_table(clean) is None
+    # the torque transducer's gain at one back pressure is K_F's shape (and pump-mode friction's): not tried;
+    # at two back pressures it is
+    assert "one pressure" in get("torque_meter_gain").unseen_in_table(clean)
+    second = _map(spec, map_grid([300, 1000, 2000], [30, 100, 200, 300], 4, p_low_bar=45.0), np.random.default_rng(5))
+    both = _table(spec, pd.concat([df, second], ignore_index=True), tmp_path / "two_back_pressures.csv")
+    assert get("torque_meter_gain").unseen_in_table(both) is None
     shifted = _table(spec, df.assign(q_case_lpm=df.q_case_lpm + 0.05), tmp_path / "shifted.csv")
     assert offset.unseen_in_table(shifted) is None
     scaled = _table(spec, df.assign(q_a_lpm=df.q_a_lpm * 1.01), tmp_path / "scaled.csv")

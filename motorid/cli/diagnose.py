@@ -45,6 +45,9 @@ def run(args) -> int:
                           channels=args.channels,
                           progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
     result.save(out)
+    from motorid.cli.tables import drop_stale_points
+
+    drop_stale_points(out, result.log_points)
     print(result)
     print(f"wrote {out / DIAGNOSIS_FILE}")
     write_refit(out, args, spec, [m["id"] for m in result.document.get("mechanisms", [])])

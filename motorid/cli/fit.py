@@ -45,6 +45,9 @@ def run(args) -> int:
     result = api.fit(args.logs, spec, bayes=args.bayes, harmonics=args.harmonics, seed=args.seed,
                      motor_path=args.motor, channels=args.channels)
     result.save(out)
+    from motorid.cli.tables import drop_stale_points
+
+    drop_stale_points(out, result.log_points)
     print(result)
     print(f"wrote {out / RESULT_FILE}")
     if args.report:

@@ -36,6 +36,16 @@ def reduce_angle_free_logs(args, logs, spec, out: Path, say: bool = False) -> tu
     return reduced.logs_for_breakaways(logs), [reduced.path]
 
 
+def drop_stale_points(out: Path, reduced) -> None:
+    """Remove a points_from_logs.csv an earlier run left in ``out`` (--force) where this run made none:
+    the folder must not show points its result.json was not fitted on."""
+    from motorid.identify.log_points import POINTS_FILE
+
+    stale = out / POINTS_FILE
+    if reduced is None and stale.exists():
+        stale.unlink()
+
+
 def place_points(args, doc: dict, out: Path) -> None:
     """Move the operating points of :func:`reduce_angle_free_logs` into ``out`` and say in ``doc`` where they
     came from (:meth:`~motorid.identify.log_points.LogPoints.annotate`)."""
@@ -64,6 +74,7 @@ def run_table_fit(args, logs, tables, spec) -> int:
     place_points(args, doc, out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / RESULT_FILE)
+    drop_stale_points(out, getattr(args, "log_points", None))
     print(format_summary(doc))
     if comparison is not None:
         print(format_comparison(comparison))
@@ -138,6 +149,7 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
     place_points(args, doc, out)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / "diagnosis.json")
+    drop_stale_points(out, getattr(args, "log_points", None))
     if not doc["mismatch"]:
         print("no mechanism earns its place on the table (ΔBIC below --min-evidence)")
     for m in doc["mechanisms"]:

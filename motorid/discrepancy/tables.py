@@ -83,7 +83,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
     bic = _profile_bic(fit0)
     base_fit = best_fit = fit0
     steps = []
-    if dataset is None:  # a table alone: what its points cannot tell from the physics it mimics
+    if dataset is None or not dataset.n_running:  # the points alone: what they cannot tell from what it mimics
         for mech in list(cands):
             why = mech.unseen_in_table(table)
             if why is not None:

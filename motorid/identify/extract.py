@@ -326,11 +326,12 @@ def _extract_run(g: _Gathered, r: int, key, pos, cols, protocol, file, settings,
 def mean_torque_angle(pistons: int) -> float:
     """A shaft angle θ* where the port sum S(θ) = Σ_{cos θᵢ > 0} cos θᵢ equals its mean n/π over the
     angle (MODEL.md Eq. 1-7: there the pressure torque is D·ΔP/2π, its mean) [rad]."""
+    from motorid.physics.kinematics import port_a_sum
+
     if pistons < 2:
         return math.nan
     theta = np.linspace(0.0, 2 * np.pi / pistons, 4001)
-    c = np.cos(theta[:, None] + 2 * np.pi * np.arange(pistons)[None, :] / pistons)
-    s = np.where(c > 0, c, 0.0).sum(axis=1) - pistons / np.pi
+    s = np.asarray(port_a_sum(theta, pistons)) - pistons / np.pi
     cross = np.flatnonzero(np.sign(s[1:]) != np.sign(s[:-1]))
     if not cross.size:
         return float(theta[np.argmin(np.abs(s))])

@@ -10,6 +10,8 @@ from typing import Sequence
 
 import numpy as np
 
+from motorid.physics.sensors import ONE_BACK_PRESSURE_PA, one_back_pressure  # noqa: F401 (re-exported)
+
 
 def relative_spread(x) -> float:
     """The 2-98 % range of the finite values of ``x`` over their largest magnitude [-]; 0 for fewer than two."""
@@ -144,10 +146,6 @@ def null_space_reasons(JtJ: np.ndarray, free: list, tol: float) -> dict:
     return out
 
 
-#: spread (2-98 %) of the low-pressure port below which the points share one back pressure [Pa]
-ONE_BACK_PRESSURE_PA = 1e5
-
-
 def one_back_pressure_warning(low_port_pressure, kf) -> str:
     """A warning where every running point has its low-pressure port at one pressure: the friction
     K_F·D·(P_A + P_B) is then K_F·D·|ΔP| plus a constant, the shape a gain error g of the torque
@@ -158,10 +156,7 @@ def one_back_pressure_warning(low_port_pressure, kf) -> str:
     low_port_pressure : min(P_A, P_B) of each running point [Pa]; kf : the fitted K_F [-]."""
     low = np.asarray(low_port_pressure, dtype=float)
     low = low[np.isfinite(low)]
-    if low.size < 2 or kf is None:
-        return ""
-    lo, hi = np.percentile(low, [2, 98])
-    if hi - lo > ONE_BACK_PRESSURE_PA:
+    if kf is None or not one_back_pressure(low):
         return ""
     share = 0.01 / (2 * np.pi) / abs(kf) if kf else np.inf
     share = f", {100 * share:.0f} % of this fit's K_F" if share < 10 else ", more than this fit's whole K_F"

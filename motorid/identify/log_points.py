@@ -97,24 +97,36 @@ def _log_files(paths) -> list:
     return out
 
 
+#: rows read first to see whether a CSV's shaft-angle column holds any value (the rest only if not)
+ANGLE_PROBE_ROWS = 20_000
+
+
 def _csv_lacks_angle(path: Path) -> bool:
+    """Whether a plain CSV log has no shaft-angle column, or an empty one: its header from the
+    file's head, then the column alone, its first :data:`ANGLE_PROBE_ROWS` rows before the rest."""
     from motorid.errors import InputError
-    from motorid.io.logs import _map_columns, _read_text, _split_header
+    from motorid.io.logs import _map_columns, _split_header
+    from motorid.io.tables import _head_text
 
     try:
-        fields, delim, body, _ = _split_header(path, _read_text(path))
+        fields, delim, _, header_line = _split_header(path, _head_text(path))
         found, _ = _map_columns(path, fields)
-    except (InputError, OSError):
+    except (InputError, OSError, IndexError):
         return False  # the log reader says what is wrong with it
     if "theta_rad" not in found:
         return True
-    import io
-
     j = found["theta_rad"][0]
-    column = pd.read_csv(io.StringIO(body), sep=delim, header=None, usecols=[j], skipinitialspace=True,
-                         keep_default_na=True, na_values=["-", "--", "null", "NULL", "None", "none"])[j]
-    values = pd.to_numeric(column, errors="coerce")
-    return not np.isfinite(values.to_numpy(dtype=float)).any()
+    for rows in (ANGLE_PROBE_ROWS, None):
+        try:
+            column = pd.read_csv(path, sep=delim, header=None, skiprows=header_line, usecols=[j], nrows=rows,
+                                 skipinitialspace=True, dtype=str, keep_default_na=False)[j]
+        except (ValueError, OSError, pd.errors.ParserError):
+            return False
+        if np.isfinite(pd.to_numeric(column.str.strip(), errors="coerce").to_numpy(dtype=float)).any():
+            return False
+        if rows is not None and len(column) < rows:
+            break
+    return True
 
 
 def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings | None = None):
@@ -193,13 +205,22 @@ def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings |
 
 
 def _holds_still(cols: dict, chosen: np.ndarray) -> bool:
-    """Whether a run's steady samples hold speed and ΔP within :data:`STEADY_SPREAD` of their level."""
-    from motorid.robust import moving_median, odd_window
+    """Whether a run's steady samples hold speed and ΔP within :data:`STEADY_SPREAD` of their level
+    (on the medians of about 1000 blocks of samples, smoothed by a moving median of 5)."""
+    import warnings
+
+    from motorid.robust import moving_median
 
     n = chosen.size
-    window = max(1, odd_window(min(max(5, n // 50), n)))
+    size = max(1, n // 1000)
+    m = n // size
     for x, floor in ((cols["speed_rad_s"][chosen], 0.5), ((cols["p_a_Pa"] - cols["p_b_Pa"])[chosen], 2e5)):
-        smooth = moving_median(x, window)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # an all-empty block
+            blocks = np.nanmedian(x[:m * size].reshape(m, size), axis=1)
+        smooth = moving_median(blocks, min(5, m) | 1)
+        if not np.isfinite(smooth).any():
+            continue
         lo, hi = np.nanquantile(smooth, [0.05, 0.95])
         if hi - lo > max(STEADY_SPREAD * abs(nanmedian(smooth)), floor):
             return False
@@ -304,24 +325,35 @@ def ripple_coverage(t, speed, pistons: int) -> float:
         return 1.0
     t, speed = t[good], speed[good]
     phase = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))]) * pistons
-    turns = max(abs(phase[-1]) / (2 * np.pi), 1e-9)
+    total = max(abs(phase[-1]), 1e-9)
+    turns = total / (2 * np.pi)
+    k = np.arange(1, RIPPLE_MULTIPLES + 1)[:, None]
+    # blocks of samples over which the frequency offsets turn the phase by under 0.05 rad: their sums of
+    # exp(i·k·φ) are rotated for each offset (cost: samples + offsets × blocks, not their product)
+    length = max(1, int(0.05 * phase.size / (RIPPLE_MULTIPLES * RIPPLE_FREQUENCY_SPAN * total)))
+    blocks = -(-phase.size // length)
     step = 1.0 / (8.0 * RIPPLE_MULTIPLES * turns)
-    count = int(min(2 * math.ceil(RIPPLE_FREQUENCY_SPAN / step) + 1, 601))
-    factors = 1.0 + np.linspace(-RIPPLE_FREQUENCY_SPAN, RIPPLE_FREQUENCY_SPAN, max(count, 1))
-    k = np.arange(1, RIPPLE_MULTIPLES + 1)
+    # offsets 1/8 of the top order's peak apart, at most 601 (and fewer over very many blocks: a run of
+    # 10⁵ pitch cycles and more is searched more coarsely)
+    most = int(max(61, min(601, 4e7 / (RIPPLE_MULTIPLES * blocks))))
+    count = int(min(2 * math.ceil(RIPPLE_FREQUENCY_SPAN / step) + 1, most)) | 1  # odd: the logged speed itself
+    offsets = np.linspace(-RIPPLE_FREQUENCY_SPAN, RIPPLE_FREQUENCY_SPAN, max(count, 1)) if count > 1 else np.zeros(1)
+    pad = blocks * length - phase.size
+    ph = np.r_[phase, np.full(pad, np.nan)].reshape(blocks, length)
+    sums = np.nansum(np.exp(1j * k[:, :, None] * ph[None, :, :]), axis=2)  # (orders, blocks)
+    centre = np.nanmean(ph, axis=1)
     worst = 0.0
-    for f in factors:
-        z = np.abs(np.mean(np.exp(1j * np.outer(k * f, phase)), axis=1))
+    for off in offsets:
+        z = np.abs(np.sum(sums * np.exp(1j * k * off * centre[None, :]), axis=1)) / phase.size
         worst = max(worst, float(z.max()))
     return min(worst, 1.0)
 
 
 def _port_sum_ripple(pistons: int) -> float:
-    """Half the peak-to-peak of S(θ) = Σ cos θᵢ over the pistons facing one port, over its mean n/π."""
-    theta = np.linspace(0.0, 2 * np.pi / max(pistons, 1), 2001)
-    phases = theta[:, None] + 2 * np.pi * np.arange(pistons)[None, :] / pistons
-    c = np.cos(phases)
-    total = np.where(c > 0, c, 0.0).sum(axis=1)
+    """Half the peak-to-peak of the port sum S(θ) (physics/kinematics.port_a_sum) over its mean n/π."""
+    from motorid.physics.kinematics import port_a_sum
+
+    total = np.asarray(port_a_sum(np.linspace(0.0, 2 * np.pi / max(pistons, 1), 2001), pistons))
     return float((total.max() - total.min()) / 2 / (pistons / np.pi))
 
 
@@ -415,14 +447,45 @@ class LogPoints:
         return out
 
 
-def points_from_logs(paths, spec, channels=None, folder=None) -> LogPoints | None:
+#: the reason extract gives a running run that has no shaft angle (identify/steady.py)
+NO_ANGLE = "missing a shaft angle"
+
+
+def runs_without_angle(dataset) -> tuple[int, int]:
+    """(running runs left out for want of a shaft angle, running runs) of an extracted dataset."""
+    runs = getattr(dataset, "runs", None)
+    if runs is None or "excluded" not in getattr(runs, "columns", ()):
+        return 0, 0
+    running = runs["protocol"].astype(str) != STARTABILITY
+    return int((runs.loc[running, "excluded"].astype(str) == NO_ANGLE).sum()), int(running.sum())
+
+
+def angle_missing_everywhere(dataset) -> bool:
+    """Whether an extracted dataset has no running sample because no running run holds a shaft angle
+    (a format or channel map the cheap test of :func:`logs_lack_shaft_angle` cannot see into)."""
+    missing, running = runs_without_angle(dataset)
+    return not dataset.n_running and running > 0 and missing == running
+
+
+def mixed_angle_warning(dataset) -> str:
+    """A warning where some running runs hold a shaft angle and others none (those are left out)."""
+    missing, running = runs_without_angle(dataset)
+    if not missing or missing == running:
+        return ""
+    return (f"{missing} of {running} running runs hold no shaft angle and are left out of this fit: fit the logs "
+            f"without an angle on their own (they are then fitted as operating points, docs/maps.md), or "
+            f"give them their angle channel")
+
+
+def points_from_logs(paths, spec, channels=None, folder=None, known: bool = False) -> LogPoints | None:
     """Where no log of ``paths`` holds a shaft angle: read them, reduce them to operating points,
     write ``folder/`` :data:`POINTS_FILE` (a new temporary folder where ``folder`` is None) →
-    :class:`LogPoints`; None where a log may hold a shaft angle."""
+    :class:`LogPoints`; None where a log may hold a shaft angle (``known``: the caller found
+    none in the extracted logs, :func:`angle_missing_everywhere`)."""
     from motorid.errors import InputError
     from motorid.io.logs import read_logs
 
-    if not logs_lack_shaft_angle(paths, channels):
+    if not known and not logs_lack_shaft_angle(paths, channels):
         return None
     frame = read_logs([str(p) for p in paths], spec, channels)
     points, notes = operating_points(frame, spec)
@@ -440,5 +503,21 @@ def points_from_logs(paths, spec, channels=None, folder=None) -> LogPoints | Non
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / POINTS_FILE
     points.to_csv(path, index=False, float_format="%.9g", lineterminator="\n")
+    _check_points(path, spec, paths)
     steady = int((points["source"] == "steady run").sum())
     return LogPoints(path, notes, steady, len(points) - steady, int(points.attrs.get("startability_runs", 0)))
+
+
+def _check_points(path: Path, spec, logs) -> None:
+    """The table checks (the ideal machine: a unit's factor, a pump's signs) on the points, a refusal
+    naming the logs they came from rather than the temporary points file."""
+    from motorid.errors import InputError
+    from motorid.io.table_checks import check_against_ideal
+    from motorid.io.tables import read_table
+
+    try:
+        check_against_ideal(read_table(path, spec), path)
+    except InputError as exc:
+        names = ", ".join(Path(p).name for p in logs)
+        raise InputError(str(exc).replace(str(path), f"the operating points of {names}")
+                         .replace(path.name, f"the operating points of {names}")) from None

@@ -230,6 +230,7 @@ class _Residual:
             return jnp.concatenate(parts)
 
         self.params = params
+        self.log_pred = jax.jit(log_pred)
         self.table_pred = jax.jit(table_pred) if table is not None else None
         self.residual = jax.jit(residual)
         self.jacobian = jax.jit(jax.jacfwd(residual))
@@ -355,6 +356,12 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
             if c in log_fit.sigma:
                 ok = np.asarray(log_fit.inliers[c], bool) & np.isfinite(np.asarray(log_fit.residuals[c], float))
                 w_logs[c] = np.where(ok, 1.0 / np.asarray(log_fit.sigma[c], float), 0.0)
+    # logs that give breakaways alone (logs without a shaft angle beside their points: identify/log_points.py):
+    # their own fit could not settle K_F and T_Fc, so its breakaway noise is not the events' noise; its
+    # scale is estimated again from the joint residuals each round, as a table channel's is
+    rescale_breakaway = (dataset is not None and log_fit is not None and not dataset.n_running
+                         and "breakaway" in w_logs and not fixed_noise)
+    breakaway_scale = 1.0
     steps, converged = 0, True
     cache = {} if _cache is None else _cache
 
@@ -409,6 +416,15 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
                 continue
             r = (table.measured[c] - pred[c])[has[c]] / table.relative_sigma[c][has[c]]
             sigma_c[c] = float(max(np.sqrt(np.sum(r**2) / dof), tiny))
+        if rescale_breakaway:
+            wb = w_logs["breakaway"]
+            on = wb > 0
+            rb = (np.asarray(prob.log_obs["breakaway"]) - np.asarray(prob.log_pred(x)["breakaway"]))[on] * wb[on]
+            dof_b = max(int(on.sum()) - sum(1 for k in free if k in ("KFS", "Ks")), 1)
+            factor = float(np.sqrt(np.sum(rb ** 2) / dof_b)) if on.any() else 1.0
+            if np.isfinite(factor) and factor > 0:
+                w_logs["breakaway"] = wb / factor
+                breakaway_scale *= factor
 
     prob = problem(free)
     x = np.array([values[k] for k in free]) / prob.scales if free else np.zeros(0)
@@ -461,9 +477,13 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     tnoise = {c: (sigma_c[c] if np.isfinite(table.measured[c]).any() else None) for c in TABLE_CHANNELS}
     if log_fit is not None:
         noise, noise_by_run, outliers = dict(log_fit.noise), dict(log_fit.noise_by_run), dict(log_fit.outliers)
+        if breakaway_scale != 1.0 and "breakaway" in noise:
+            noise["breakaway"] = noise["breakaway"] * breakaway_scale
         used = {c: int(log_fit.used.get(c, 0)) + used_t.get(c, 0) for c in set(log_fit.used) | set(used_t)}
         residuals = dict(log_fit.residuals)
         sigma, inliers = dict(log_fit.sigma), dict(log_fit.inliers)
+        if breakaway_scale != 1.0 and "breakaway" in sigma:
+            sigma["breakaway"] = np.asarray(sigma["breakaway"], dtype=float) * breakaway_scale
     else:
         noise = {c: v for c, v in tnoise.items() if v is not None}
         noise_by_run = {c: np.array([v]) for c, v in noise.items()}

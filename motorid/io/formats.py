@@ -315,7 +315,7 @@ class _H5:
         if self.matlab:
             value = np.asarray(value).T
             if obj.attrs.get("MATLAB_class", b"") in (b"char", "char"):
-                if value.ndim == 2 and min(value.shape) > 1:  # a char matrix: one text per row (run names)
+                if value.ndim == 2 and value.shape[0] > 1:  # a char matrix: one text per row (run names)
                     return np.array(["".join(map(chr, row)).rstrip("\x00 ") for row in value], dtype=object)
                 return np.array("".join(map(chr, np.ravel(value))))
         value = np.asarray(value)

@@ -41,6 +41,7 @@ flow-meter offset :class:`MeterOffset`; offsets that differ run to run are told 
 from __future__ import annotations
 
 import math
+import numpy as np
 
 import jax.numpy as jnp
 
@@ -176,10 +177,40 @@ class _LinearReading(CatalogMechanism):
         without it a zero or a gain of one meter is a leakage law in other words (a constant case
         flow is the low-pressure port's leakage at one boost pressure and temperature)."""
         if self.channel == "torque":
-            return None
+            return self._torque_unseen(table)
         from motorid.physics.mass_balance import table_balance_shows
 
         return table_balance_shows(table, self.channel, gain=isinstance(self, MeterGain))
+
+
+    def _torque_unseen(self, table) -> str | None:
+        """The torque transducer's error on a table whose running points all have their low-pressure port at
+        one pressure: a gain g of the torque is then K_F's shape (K_F·D·(P_A+P_B) = K_F·D·|ΔP| + a
+        constant), and in pump mode that of a pump-mode friction, with no ripple to tell them apart."""
+        if not isinstance(self, MeterGain):
+            return None
+        tq = np.isfinite(np.asarray(table.measured["torque"], dtype=float))
+        if tq.sum() < 2 or not one_back_pressure(np.minimum(table.p_a, table.p_b)[tq]):
+            return None
+        return ("every running torque point has its low-pressure port at one pressure: a gain error of the torque "
+                "transducer is then a change of K_F (and in pump mode a pump-mode friction) in other words, "
+                "which points without the shaft-angle ripple cannot tell apart; a second back pressure does")
+
+
+#: spread (2-98 %) of the low-pressure port below which the points share one back pressure [Pa]
+ONE_BACK_PRESSURE_PA = 1e5
+
+
+def one_back_pressure(low_port_pressure) -> bool:
+    """Whether every running point has its low-pressure port at one pressure (within
+    :data:`ONE_BACK_PRESSURE_PA`, 2-98 %): K_F·D·(P_A + P_B) is then K_F·D·|ΔP| plus a constant, the
+    shape a gain error of the torque transducer gives the ideal torque."""
+    low = np.asarray(low_port_pressure, dtype=float)
+    low = low[np.isfinite(low)]
+    if low.size < 2:
+        return False
+    lo, hi = np.percentile(low, [2, 98])
+    return bool(hi - lo <= ONE_BACK_PRESSURE_PA)
 
 
 class MeterGain(_LinearReading):
