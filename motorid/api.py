@@ -203,15 +203,18 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
     reduced = None
     from motorid.identify.log_points import points_from_logs
 
-    if not tables:  # logs without a shaft angle: their operating points (identify/log_points.py)
-        reduced = points_from_logs(log_paths, spec, channels)
-        if reduced is not None:
-            tables, log_paths = [reduced.path], reduced.logs_for_breakaways(log_paths)
+    from motorid.identify.log_points import reduce_logs_without_angle
+    from motorid.io.tables import split_channel_map
+
+    # logs without a shaft angle: their operating points, with the rest (identify/log_points.py)
+    log_paths, reduced = reduce_logs_without_angle(log_paths, spec, split_channel_map(channels)[1])
+    if reduced is not None:
+        tables = list(tables) + [reduced.path]
     if tables:  # operating-point tables, alone or with logs (identify/table_pipeline.py)
         result = _fit_tables(log_paths, tables, spec, harmonics, _mechanisms(mechanisms), channels,
                              _motor_input(motor, motor_path), bayes)
         if reduced is not None:
-            reduced.annotate(result.document, logs)
+            reduced.annotate(result.document, reduced.sources)
             result.log_points = reduced
         return result
     res = identify(logs, spec, bayes=bayes, options=FitOptions(harmonics=harmonics), seed=seed,

@@ -223,7 +223,10 @@ def test_a_parquet_log_without_angle_takes_the_points_path_and_a_mixed_campaign_
     """The cheap test reads CSV headers only: a Parquet log without the angle column is found out
     from the extracted runs (every running run left out for its missing angle) and fitted as its
     points, where it gave exit 0 with nothing identified.  A campaign where some logs hold an angle
-    and others none is fitted from the first, with a warning naming the runs left out."""
+    and others none: the second become points, fitted jointly with the first (their runs were left
+    out), every parameter within 3 std of the truth, the harmonics from the logs with an angle."""
+    import tomllib
+
     import motorid
 
     frame = pd.read_csv(DEMO / "campaign.csv.gz")
@@ -239,8 +242,12 @@ def test_a_parquet_log_without_angle_takes_the_points_path_and_a_mixed_campaign_
     frame[frame["run_id"].isin(half)].to_csv(a, index=False)
     frame[~frame["run_id"].isin(half)].assign(shaft_angle_deg=np.nan).to_csv(b, index=False)
     mixed = motorid.fit([a, b], DEMO / "motor.toml")
-    assert mixed.log_points is None
-    assert any("hold no shaft angle and are left out" in w for w in mixed.warnings)
+    assert mixed.log_points is not None and mixed.log_points.sources == (str(b),)
+    assert "no shaft angle in 1 of the 2 logs (b.csv)" in mixed.warnings[0]
+    truth = tomllib.loads((DEMO / "truth.toml").read_text())["parameters"]
+    par = mixed.document["parameters"]
+    for k, v in truth.items():
+        assert par[k]["identifiable"] and abs(par[k]["value"] - v) < 3 * par[k]["std"], (k, par[k], v)
 
 
 def test_a_refusal_of_the_points_names_the_logs_not_a_temporary_file(tmp_path):

@@ -34,10 +34,11 @@ def run(args) -> int:
     from motorid.io.tables import split_logs_and_tables
 
     logs, tables = split_logs_and_tables(args.logs, args.channels)
-    if not tables:  # logs without a shaft angle: fitted as their operating points (identify/log_points.py)
-        from motorid.cli.tables import reduce_angle_free_logs
+    from motorid.cli.tables import reduce_angle_free_logs
 
-        logs, tables = reduce_angle_free_logs(args, logs, spec, out)
+    # logs without a shaft angle: their operating points, with the rest (identify/log_points.py)
+    logs, more = reduce_angle_free_logs(args, logs, spec, out)
+    tables = tables + more
     if tables:  # operating-point tables (no time column): cli/tables.py
         from motorid.cli.tables import run_table_fit
 

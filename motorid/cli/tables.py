@@ -18,22 +18,25 @@ from motorid.identify.table_pipeline import identify_tables, table_inputs, table
 
 
 def reduce_angle_free_logs(args, logs, spec, out: Path, say: bool = False) -> tuple[list, list]:
-    """Logs that hold no shaft angle → ([], [their operating points, a CSV in a temporary folder until the
-    command succeeds: :func:`place_points` moves it into ``out``]); other logs → (logs, [])."""
-    from motorid.identify.log_points import points_from_logs
+    """The logs that hold no shaft angle → their operating points, a CSV in a temporary folder until the
+    command succeeds (:func:`place_points` moves it into ``out``) → (logs for the log fit, [that CSV]);
+    where every log holds an angle: (logs, [])."""
+    from motorid.identify.log_points import reduce_logs_without_angle
+    from motorid.io.tables import split_channel_map
 
     if not logs:
         return logs, []
-    reduced = points_from_logs(logs, spec, getattr(args, "channels", None))
+    _, log_map = split_channel_map(getattr(args, "channels", None))
+    kept, reduced = reduce_logs_without_angle(logs, spec, log_map)
     if reduced is None:
         return logs, []
     if say:  # (a fit says it in its warnings)
         print(reduced.summary())
         for note in reduced.notes:
             print(f"  {note}")
-    args.reduced_logs = list(logs)
+    args.reduced_logs = list(reduced.sources)
     args.log_points = reduced
-    return reduced.logs_for_breakaways(logs), [reduced.path]
+    return kept, [reduced.path]
 
 
 def drop_stale_points(out: Path, reduced) -> None:

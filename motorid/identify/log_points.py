@@ -160,6 +160,17 @@ def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings |
         arrays["p_case_Pa"] = np.zeros(len(frame))
         notes.append("no case pressure in these logs: taken as 0 bar gauge (the leakage to the case follows "
                      "P − P_c)")
+    temp = arrays["oil_temp_C"]
+    spec_temp = getattr(getattr(spec, "oil", None), "temp_C", None)
+    if (spec_temp is not None and np.isfinite(temp).all() and temp.size and np.ptp(temp) == 0
+            and float(temp[0]) == float(spec_temp) and not arrays[VISCOSITY_FROM_OIL].size == 0
+            and arrays[VISCOSITY_FROM_OIL].all()):
+        # one temperature to the last digit over the whole campaign, the spec's own: a constant someone
+        # typed (a channel map's [constants], an assumed value), not a reading; the points then carry none,
+        # as a table that records none (a viscosity per recording may then be tried: docs/maps.md)
+        arrays[TEMPERATURE_ASSUMED] = np.ones(len(frame), bool)
+        notes.append(f"the logs' oil temperature is one constant, {float(temp[0]):g} °C, the spec's [oil] temp_C, "
+                     f"for every sample: taken as assumed, not recorded")
     protocols = frame["protocol"].astype(str).to_numpy()
     files = frame["file"].astype(str).to_numpy() if "file" in frame.columns else np.full(len(frame), "")
     several_files = len(set(files)) > 1
@@ -401,9 +412,12 @@ class LogPoints:
     cells: int  # points that are a quasi-steady cell of a run in motion
     startability_runs: int  # left out
 
+    scope: str = "these logs"  # which logs the points came from, in words
+    sources: tuple = ()  # those logs
+
     def summary(self) -> str:
         """One sentence for the user and for result.json's warnings."""
-        return (f"no shaft angle in these logs: fitted as {self.steady_runs + self.cells} operating points "
+        return (f"no shaft angle in {self.scope}: fitted as {self.steady_runs + self.cells} operating points "
                 f"({self.steady_runs} steady runs, {self.cells} quasi-steady cells of runs in motion; "
                 f"identify/log_points.py), with the model averaged over the shaft angle"
                 + (f", jointly with the breakaways of their {self.startability_runs} startability run(s) (the "
@@ -505,7 +519,8 @@ def points_from_logs(paths, spec, channels=None, folder=None, known: bool = Fals
     points.to_csv(path, index=False, float_format="%.9g", lineterminator="\n")
     _check_points(path, spec, paths)
     steady = int((points["source"] == "steady run").sum())
-    return LogPoints(path, notes, steady, len(points) - steady, int(points.attrs.get("startability_runs", 0)))
+    return LogPoints(path, notes, steady, len(points) - steady, int(points.attrs.get("startability_runs", 0)),
+                     sources=tuple(str(p) for p in paths))
 
 
 def _check_points(path: Path, spec, logs) -> None:
@@ -521,3 +536,19 @@ def _check_points(path: Path, spec, logs) -> None:
         names = ", ".join(Path(p).name for p in logs)
         raise InputError(str(exc).replace(str(path), f"the operating points of {names}")
                          .replace(path.name, f"the operating points of {names}")) from None
+
+
+def reduce_logs_without_angle(logs, spec, channels=None):
+    """Split a campaign's logs by whether they hold a shaft angle → (the logs for the log fit, LogPoints of
+    those that hold none, or None).  Every log without an angle (the cheap test of
+    :func:`logs_lack_shaft_angle`, file by file) is reduced to points; the logs for the log fit are the
+    others, plus the angle-free ones where they hold startability runs (their breakaways)."""
+    free = [p for p in logs if logs_lack_shaft_angle([p], channels)]
+    if not free:
+        return list(logs), None
+    reduced = points_from_logs(free, spec, channels, known=True)
+    if len(free) < len(logs):
+        reduced.scope = f"{len(free)} of the {len(logs)} logs ({', '.join(Path(p).name for p in free[:3])}" + (
+            ", …)" if len(free) > 3 else ")")
+    kept = [p for p in logs if p not in free]
+    return kept + reduced.logs_for_breakaways(free), reduced
