@@ -261,3 +261,24 @@ def test_a_refusal_of_the_points_names_the_logs_not_a_temporary_file(tmp_path):
     line = proc.stderr.strip().splitlines()[-1]
     assert "pumpsign.csv" in line and "motorid-points-" not in line, line
     assert not (tmp_path / "o").exists()
+
+
+def test_the_inertia_torque_of_a_cells_mean_acceleration_is_taken_out_where_the_spec_gives_j():
+    """A recording in motion whose torque carries −J·α (Eq. 17): with the spec's J the cells keep the
+    steady law; the cells accelerate, so without J their torque is off by J·ᾱ."""
+    from motorid.identify.log_points import operating_points
+    from motorid.model import MotorSpec
+
+    frame = _recording_of_motion(seconds=240.0)
+    t, w = frame["time_s"].to_numpy(), frame["speed_rad_s"].to_numpy()
+    alpha = np.gradient(w, t)
+    J = 0.5  # kg·m², large enough that J·α (up to 16 N·m) dwarfs the noise
+    frame["torque_Nm"] = frame["torque_Nm"] - J * alpha
+    spec = MotorSpec("probe", 9, 80e-6, J)
+    points, _ = operating_points(frame, spec)
+    dp = (points["p_a_bar"] - points["p_b_bar"]) * 1e5
+    law = 1.5e-6 * dp - 0.01 * points["speed_rpm"] * math.pi / 30
+    assert np.max(np.abs(points["torque_Nm"] - law)) < 0.15
+    bare, _ = operating_points(frame, MotorSpec("probe", 9, 80e-6, 0.0))
+    assert np.max(np.abs(bare["torque_Nm"] - law)) > 1.0
+    assert np.isfinite(points["accel_rpm_s"]).all()

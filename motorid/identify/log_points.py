@@ -21,6 +21,8 @@ A running run becomes
   :data:`ACCEL_TIME_S`) are binned in a (speed, ΔP) grid of :data:`GRID` cells over the
   campaign's range, and a cell of :data:`MIN_DURATION_S` of samples or more is a point.
 
+Where the spec gives the inertia J, each point's torque has the inertia torque of its mean
+acceleration taken out (+J·ᾱ, Eq. 17), so that it is the steady torque the table model holds.
 A point whose means give power out at both the shaft and the ports (T·ω > 0 and
 ΔP·Q_A < 0) breaks the first law for a steady point and is left out with a note.
 Startability runs stay with the log fit, which takes their breakaways at the pressure torque's
@@ -201,7 +203,7 @@ def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings |
             notes.append(f"run {key}: no steady stretch and no quasi-steady cell (" + (why or "speed or ΔP moves "
                          "through the run") + ")")
         for k, idx in enumerate(cells, start=1):
-            rows.append(_point(f"{key}:{k}", cols, idx, recording, "quasi-steady cell"))
+            rows.append(_point(f"{key}:{k}", cols, idx, recording, "quasi-steady cell", spec))
     points = pd.DataFrame(rows)
     points.attrs["startability_runs"] = n_start
     if points.empty:
@@ -249,6 +251,7 @@ def _quasi_steady_cells(cols: dict, speed_scale: float, dp_scale: float) -> list
     filled = pd.Series(speed).interpolate(limit_direction="both").to_numpy()
     smooth = pd.Series(filled).rolling(w, center=True, min_periods=1).mean().to_numpy()
     accel = np.gradient(smooth, t)
+    cols["accel_rad_s2"] = accel  # the cells' mean acceleration (_point: the inertia torque taken out)
     dp = cols["p_a_Pa"] - cols["p_b_Pa"]
     ok = (np.isfinite(speed) & np.isfinite(dp) & np.isfinite(cols["p_case_Pa"])
           & np.isfinite(cols["viscosity_Pa_s"])
@@ -306,11 +309,17 @@ def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str, s
         spread = spreads[name]
         row[name.replace("_Nm", "_std_Nm").replace("_lpm", "_std_lpm")] = spread if spread > 0 else math.nan
     t = cols["time_s"][idx]
-    if t.size >= 2 and np.ptp(t) > 0:
+    alpha = math.nan  # the point's mean acceleration [rad/s²]
+    if source == "steady run" and t.size >= 2 and np.ptp(t) > 0:
         speed = cols["speed_rad_s"][idx]
         good = np.isfinite(speed)
-        slope = np.polyfit(t[good], speed[good], 1)[0] if good.sum() >= 2 and source == "steady run" else math.nan
-        row["accel_rpm_s"] = float(slope) * 30.0 / math.pi if np.isfinite(slope) else math.nan
+        alpha = float(np.polyfit(t[good], speed[good], 1)[0]) if good.sum() >= 2 else math.nan
+    elif "accel_rad_s2" in cols:
+        alpha = float(np.nanmean(cols["accel_rad_s2"][idx]))
+    row["accel_rpm_s"] = alpha * 30.0 / math.pi
+    inertia = float(getattr(spec, "inertia", 0.0) or 0.0)
+    if inertia > 0 and np.isfinite(alpha) and np.isfinite(row.get("torque_Nm", math.nan)):
+        row["torque_Nm"] += inertia * alpha  # the steady torque: the model's T_J = −J·α taken out (Eq. 17)
     row["source"] = source
     return row
 
