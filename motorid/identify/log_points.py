@@ -14,7 +14,7 @@ A running run becomes
   every channel over them, with the count and each output's spread (``n_samples``,
   ``*_std_*``: the table's relative weights), the spread widened by what the sampling leaves
   of the shaft-angle ripple in the mean (a rate in step with the pitch frequency sees it at a
-  few phases only: identify/ripple_coverage.py);
+  few phases only: :func:`ripple_coverage`, :func:`ripple_bias`);
 * **quasi-steady points** where it is a recording of continuous motion (a wave-energy test
   machine, a duty cycle): the samples that turn (|ω| ≥ :data:`MIN_SPEED_SHARE` of the
   campaign's speed) and barely accelerate (|dω/dt| ≤ the campaign's speed per
@@ -42,7 +42,6 @@ import pandas as pd
 from motorid.identify.steady import steady_run
 from motorid.identify.types import RUNNING_PROTOCOLS, STARTABILITY, ExtractSettings
 from motorid.robust import nanmedian
-from motorid.identify.ripple_coverage import ripple_bias, ripple_coverages
 
 #: the file the points are written to, in the output folder
 POINTS_FILE = "points_from_logs.csv"
@@ -213,46 +212,9 @@ def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings |
     for pid in points.loc[drop, "point_id"]:
         notes.append(f"point {pid} left out: its means give power out at both the shaft and the ports (first law; "
                      f"a transient the reduction did not remove, or pressures read away from the ports)")
-    points = points.loc[~drop].reset_index(drop=True)
-    points = _leave_out_in_step(points, notes).dropna(axis=1, how="all")
+    points = points.loc[~drop].reset_index(drop=True).dropna(axis=1, how="all")
     points.attrs["startability_runs"] = n_start
     return points, notes
-
-
-#: a steady run is in step where the model's ripple at the multiples it samples in step exceeds this share
-#: of the noise's standard error (spread/√n): such runs share one error, which does not average out
-IN_STEP_SHARE = 0.5
-#: … or this share of the output's level: the spread that sets the standard error holds the ripple the
-#: samples do see, so it overstates the noise a fit's residuals then show (a 5-piston unit's 20th pitch
-#: multiple, 2·10⁻⁴ of the torque, biased K_v by 6 std from the runs locked to it)
-LOCKED_RELATIVE = 1e-4
-#: in-step runs are left out where this share of the points, and :data:`MIN_KEPT` points, remain
-KEPT_SHARE, MIN_KEPT = 0.3, 10
-
-
-def _leave_out_in_step(points: pd.DataFrame, notes: list) -> pd.DataFrame:
-    """Leave out the steady runs sampled in step with a multiple of the pitch frequency (``in_step``):
-    the ripple left in their means is a shared error, not noise, where the logger's clock locks every
-    such run to one phase (the fit was biased by 15 % in K_v on a probe campaign), unless too few
-    points would remain: then they are kept, widened, with a warning."""
-    if "in_step" not in points:
-        return points
-    step = points["in_step"].fillna(False).to_numpy(dtype=bool)
-    if step.any():
-        kept = int((~step).sum())
-        if kept >= max(MIN_KEPT, KEPT_SHARE * len(points)):
-            notes.append(f"{int(step.sum())} steady run(s) left out, sampled in step with a multiple of the pitch "
-                         f"frequency (the ripple their means hold is not noise where the logger's clock gives them "
-                         f"one phase; ripple_coverage in points_from_logs.csv): "
-                         + ", ".join(points.loc[step, "point_id"].astype(str).head(5))
-                         + (", …" if step.sum() > 5 else ""))
-            points = points.loc[~step].reset_index(drop=True)
-        else:
-            notes.append(f"{int(step.sum())} of {len(points)} steady runs are sampled in step with a multiple of the "
-                         f"pitch frequency: their means hold part of the ripple, as a shared error where the "
-                         f"logger's clock gives them one phase; the parameters may carry it beyond their std "
-                         f"(a sample rate not in step with n·ω/2π avoids it)")
-    return points.drop(columns=["in_step"])
 
 
 def _holds_still(cols: dict, chosen: np.ndarray) -> bool:
@@ -335,17 +297,11 @@ def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str, s
     if spec is not None and source == "steady run":
         # what the sampling leaves of the shaft-angle ripple in the mean: widened into the spread, so that
         # spread/√n_samples is the point's standard error (the table's relative weight)
-        coverages = ripple_coverages(cols["time_s"][idx], cols["speed_rad_s"][idx], int(spec.pistons))
-        bias, locked = ripple_bias(row, spreads, coverages, spec)
-        # in step: the model's ripple at the multiples sampled in step exceeds IN_STEP_SHARE of the noise's
-        # standard error; such runs share the phase the logger's clock locks them to, so their errors do not
-        # average out
-        row["in_step"] = any(np.isfinite(spreads[k]) and (locked[k] > IN_STEP_SHARE * spreads[k] / math.sqrt(idx.size)
-                                                          or locked[k] > LOCKED_RELATIVE * abs(row.get(k, 0.0)))
-                             for k in spreads)
+        coverage = ripple_coverage(cols["time_s"][idx], cols["speed_rad_s"][idx], int(spec.pistons))
+        bias = ripple_bias(row, spreads, coverage, spec)
         for name in spreads:
             spreads[name] = math.sqrt(spreads[name] ** 2 + idx.size * bias[name] ** 2)
-        row["ripple_coverage"] = float(coverages.max())
+        row["ripple_coverage"] = coverage
     from motorid.io.logs import TEMPERATURE_ASSUMED, VISCOSITY_FROM_OIL
 
     if not cols[TEMPERATURE_ASSUMED][idx].any():
@@ -370,6 +326,84 @@ def _point(point_id: str, cols: dict, idx: np.ndarray, recording, source: str, s
         row["torque_Nm"] += inertia * alpha  # the steady torque: the model's T_J = −J·α taken out (Eq. 17)
     row["source"] = source
     return row
+
+
+#: the multiples of the piston-pitch order n whose ripple a steady run's sampling may not average out
+RIPPLE_MULTIPLES = 4
+#: the pitch frequency is taken as uncertain by this share (a speed sensor's gain error)
+RIPPLE_FREQUENCY_SPAN = 0.003
+#: where the leakage's own ripple (K_L(θ)'s harmonics) must be bounded without data: this share of it
+LEAK_RIPPLE_SHARE = 0.5
+
+
+def ripple_coverage(t, speed, pistons: int) -> float:
+    """How far the samples of a steady run are from seeing every phase of the shaft-angle ripple:
+    max over the orders k·n (k = 1 … :data:`RIPPLE_MULTIPLES`) and over the pitch frequency within
+    ±:data:`RIPPLE_FREQUENCY_SPAN` of |mean exp(i·k·n·φ)|, φ = ∫ω dt the angle up to a constant
+    (0: the ripple averages out of the mean; 1: every sample at one phase, the ripple reads as a
+    constant).  A run sampled in step with the pitch frequency (a rate that divides n·ω/2π) comes
+    out near 1."""
+    t, speed = np.asarray(t, float), np.asarray(speed, float)
+    good = np.isfinite(t) & np.isfinite(speed)
+    if pistons <= 0 or good.sum() < 2:
+        return 1.0
+    t, speed = t[good], speed[good]
+    phase = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))]) * pistons
+    total = max(abs(phase[-1]), 1e-9)
+    turns = total / (2 * np.pi)
+    k = np.arange(1, RIPPLE_MULTIPLES + 1)[:, None]
+    # blocks of samples over which the frequency offsets turn the phase by under 0.05 rad: their sums of
+    # exp(i·k·φ) are rotated for each offset (cost: samples + offsets × blocks, not their product)
+    length = max(1, int(0.05 * phase.size / (RIPPLE_MULTIPLES * RIPPLE_FREQUENCY_SPAN * total)))
+    blocks = -(-phase.size // length)
+    step = 1.0 / (8.0 * RIPPLE_MULTIPLES * turns)
+    # offsets 1/8 of the top order's peak apart, at most 601 (and fewer over very many blocks: a run of
+    # 10⁵ pitch cycles and more is searched more coarsely)
+    most = int(max(61, min(601, 4e7 / (RIPPLE_MULTIPLES * blocks))))
+    count = int(min(2 * math.ceil(RIPPLE_FREQUENCY_SPAN / step) + 1, most)) | 1  # odd: the logged speed itself
+    offsets = np.linspace(-RIPPLE_FREQUENCY_SPAN, RIPPLE_FREQUENCY_SPAN, max(count, 1)) if count > 1 else np.zeros(1)
+    pad = blocks * length - phase.size
+    ph = np.r_[phase, np.full(pad, np.nan)].reshape(blocks, length)
+    sums = np.nansum(np.exp(1j * k[:, :, None] * ph[None, :, :]), axis=2)  # (orders, blocks)
+    centre = np.nanmean(ph, axis=1)
+    worst = 0.0
+    for off in offsets:
+        z = np.abs(np.sum(sums * np.exp(1j * k * off * centre[None, :]), axis=1)) / phase.size
+        worst = max(worst, float(z.max()))
+    return min(worst, 1.0)
+
+
+def _port_sum_ripple(pistons: int) -> float:
+    """Half the peak-to-peak of the port sum S(θ) (physics/kinematics.port_a_sum) over its mean n/π."""
+    from motorid.physics.kinematics import port_a_sum
+
+    total = np.asarray(port_a_sum(np.linspace(0.0, 2 * np.pi / max(pistons, 1), 2001), pistons))
+    return float((total.max() - total.min()) / 2 / (pistons / np.pi))
+
+
+def ripple_bias(row: dict, spreads: dict, coverage: float, spec) -> dict:
+    """The standard error a steady run's mean carries from the ripple its sampling leaves in it, per
+    output [the output's unit]: (R·D)/√2 with D the :func:`ripple_coverage` and R the ripple's
+    amplitude, √2 × the output's spread where the samples see the ripple (D ≤ 0.5), else at least
+    the 1992 model's own: the pressure torque's D·|ΔP|/2π × the port sum's ripple, the swept flow's
+    D·|ω|/2π × the same, and :data:`LEAK_RIPPLE_SHARE` of the case flow for K_L(θ)'s harmonics."""
+    n = int(spec.pistons)
+    a_s = _port_sum_ripple(n)
+    disp = float(spec.displacement)
+    dp = abs(row["p_a_bar"] - row["p_b_bar"]) * 1e5
+    w = abs(row["speed_rpm"]) * math.pi / 30.0
+    leak = abs(row.get("q_case_lpm", math.nan))
+    leak = 0.0 if not np.isfinite(leak) else leak
+    model = {"torque_Nm": disp * dp / (2 * math.pi) * a_s,
+             "q_a_lpm": disp * w / (2 * math.pi) * a_s * 6e4 + LEAK_RIPPLE_SHARE * leak,
+             "q_b_lpm": disp * w / (2 * math.pi) * a_s * 6e4 + LEAK_RIPPLE_SHARE * leak,
+             "q_case_lpm": LEAK_RIPPLE_SHARE * leak}
+    out = {}
+    for name, spread in spreads.items():
+        seen = math.sqrt(2.0) * spread if np.isfinite(spread) else 0.0
+        amplitude = seen if coverage <= 0.5 else max(seen, model.get(name, 0.0))
+        out[name] = amplitude * coverage / math.sqrt(2.0)
+    return out
 
 
 def _first_law_breaches(points: pd.DataFrame) -> np.ndarray:

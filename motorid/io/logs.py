@@ -284,6 +284,10 @@ def _map_columns(path: Path, fields: list):
             what = f"'{key}'"
         names = [_BY_SI[k].example if k in _BY_SI else k for k in missing[1:]]
         more = f" (and {len(names)} more: " + ", ".join(names) + ")" if names else ""
+        if missing == ["run_id"]:  # runs logged one after another: a channel map splits them by the time track
+            more += (" (a log whose runs follow each other in one file: a channel map without run_id splits them "
+                     "where the time starts again or pauses, or names the file's one run under [constants]; "
+                     "docs/formats.md)")
         raise InputError(f"{path}: missing required column {what}{more}")
     return found, extras
 
