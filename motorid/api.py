@@ -199,35 +199,29 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
     logs = [logs] if isinstance(logs, (str, Path)) else list(logs)
     from motorid.io.tables import split_logs_and_tables
 
-    log_paths, tables = split_logs_and_tables(logs, channels)
-    reduced = None
-    from motorid.identify.log_points import points_from_logs
-
-    from motorid.identify.log_points import reduce_logs_without_angle
+    from motorid.identify.log_points import (angle_missing_everywhere, mixed_angle_warning, points_from_logs,
+                                             reduce_logs_without_angle)
     from motorid.io.tables import split_channel_map
 
-    # logs without a shaft angle: their operating points, with the rest (identify/log_points.py)
-    log_paths, reduced = reduce_logs_without_angle(log_paths, spec, split_channel_map(channels)[1])
-    if reduced is not None:
-        tables = list(tables) + [reduced.path]
-    if tables:  # operating-point tables, alone or with logs (identify/table_pipeline.py)
+    log_paths, tables = split_logs_and_tables(logs, channels)
+
+    def with_points(log_paths, tables, reduced) -> FitResult:  # the table fit, with the logs' points if any
         result = _fit_tables(log_paths, tables, spec, harmonics, _mechanisms(mechanisms), channels,
                              _motor_input(motor, motor_path), bayes)
         if reduced is not None:
             reduced.annotate(result.document, reduced.sources)
             result.log_points = reduced
         return result
+
+    # logs without a shaft angle: their operating points, with the rest (identify/log_points.py)
+    log_paths, reduced = reduce_logs_without_angle(log_paths, spec, split_channel_map(channels)[1])
+    if tables or reduced is not None:  # operating-point tables, alone or with logs (identify/table_pipeline.py)
+        return with_points(log_paths, list(tables) + ([reduced.path] if reduced is not None else []), reduced)
     res = identify(logs, spec, bayes=bayes, options=FitOptions(harmonics=harmonics), seed=seed,
                    mechanisms=_mechanisms(mechanisms), channels=channels)
-    from motorid.identify.log_points import angle_missing_everywhere, mixed_angle_warning
-
     if angle_missing_everywhere(res.dataset):  # an empty angle channel the header did not tell
         reduced = points_from_logs(log_paths, spec, channels, known=True)
-        result = _fit_tables(reduced.logs_for_breakaways(log_paths), [reduced.path], spec, harmonics,
-                             _mechanisms(mechanisms), channels, _motor_input(motor, motor_path), bayes)
-        reduced.annotate(result.document, logs)
-        result.log_points = reduced
-        return result
+        return with_points(reduced.logs_for_breakaways(log_paths), [reduced.path], reduced)
     note = mixed_angle_warning(res.dataset)
     if note:
         res.ls.warnings.append(note)
@@ -330,18 +324,10 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
         if angle_missing_everywhere(dataset):  # an empty angle channel the header did not tell
             reduced = points_from_logs(logs, spec, channels, known=True)
     if reduced is not None:  # no shaft angle: the logs' operating points, diagnosed as a table
-        from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
-        from motorid.io.tables import read_tables
+        from motorid.discrepancy.tables import diagnose_tables, diagnosis_table_document
 
-        dataset = log_fit = None
-        breakaways = reduced.logs_for_breakaways(logs)
-        if breakaways:
-            from motorid.identify.least_squares import fit_least_squares
-
-            _, dataset = load_campaign(breakaways, spec, channels)
-            log_fit = fit_least_squares(dataset, spec)
-        dg = diagnose_table(read_tables([reduced.path], spec), spec, min_evidence=min_evidence, progress=progress,
-                            dataset=dataset, log_fit=log_fit)
+        dg = diagnose_tables(reduced.logs_for_breakaways(logs), [reduced.path], spec, min_evidence=min_evidence,
+                             progress=progress, channels=channels)
         doc = diagnosis_table_document(dg, spec)
         doc["inputs"] = {"tables": [str(reduced.path)], "motor": _motor_input(motor, motor_path)}
         reduced.annotate(doc, logs)

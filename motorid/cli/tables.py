@@ -13,7 +13,7 @@ import numpy as np
 
 from motorid.errors import InputError
 
-from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
+from motorid.discrepancy.tables import diagnose_tables, diagnosis_table_document
 from motorid.identify.table_pipeline import identify_tables, table_inputs, table_result_document
 
 
@@ -66,8 +66,8 @@ def run_table_fit(args, logs, tables, spec) -> int:
     from motorid.report.summary import format_fit as format_summary
 
     if getattr(args, "bayes", False):
-        raise InputError("--bayes is not available with operating-point tables, nor with logs fitted as their points (the least-squares covariance is "
-                         "reported)")
+        raise InputError("--bayes is not available with operating-point tables, nor with logs fitted as their "
+                         "points (the least-squares covariance is reported)")
     out = Path(args.out)
     check_output(out, args.force)
     tf = identify_tables(logs, tables, spec, harmonics=args.harmonics, channels=getattr(args, "channels", None))
@@ -131,22 +131,11 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
 
     from motorid.cli._common import check_output
     from motorid.identify.results import write_json_atomic
-    from motorid.io.tables import read_tables, split_channel_map
-
     out = Path(args.out)
     check_output(out, args.force, files=("diagnosis.json",))
-    table_map, log_map = split_channel_map(getattr(args, "channels", None))
-    table = read_tables(tables, spec, channels=table_map)
-    dataset = log_fit = None
-    if logs:
-        from motorid.identify.least_squares import fit_least_squares
-        from motorid.identify.pipeline import load_campaign
-
-        _, dataset = load_campaign(logs, spec, log_map)
-        log_fit = fit_least_squares(dataset, spec)
     show = sys.stderr.isatty()
-    dg = diagnose_table(table, spec, min_evidence=args.min_evidence, dataset=dataset, log_fit=log_fit,
-                        progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
+    dg = diagnose_tables(logs, tables, spec, min_evidence=args.min_evidence, channels=getattr(args, "channels", None),
+                         progress=(lambda m: print(f"  {m}", file=sys.stderr)) if show else None)
     doc = diagnosis_table_document(dg, spec)
     doc["inputs"] = table_inputs(logs, tables, str(args.motor), getattr(args, "channels", None))
     place_points(args, doc, out)

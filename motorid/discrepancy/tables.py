@@ -133,6 +133,26 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             "unexplained": unexplained}
 
 
+def diagnose_tables(log_paths, table_paths, spec, min_evidence: float = 10.0, progress=None, channels=None) -> dict:
+    """Read the tables (and logs) and diagnose them jointly (:func:`diagnose_table`; with logs, their own
+    least-squares fit weights them), as identify/table_pipeline.identify_tables fits them.
+    channels : a channel map (path or ChannelMap): for the tables where it maps no time_s, for the
+        logs where it does."""
+    from motorid.io.tables import read_tables, split_channel_map
+
+    table_map, log_map = split_channel_map(channels)
+    table = read_tables(table_paths, spec, channels=table_map)
+    dataset = log_fit = None
+    if log_paths:
+        from motorid.identify.least_squares import fit_least_squares
+        from motorid.identify.pipeline import load_campaign
+
+        _, dataset = load_campaign(log_paths, spec, log_map)
+        log_fit = fit_least_squares(dataset, spec)
+    return diagnose_table(table, spec, min_evidence=min_evidence, dataset=dataset, log_fit=log_fit,
+                          progress=progress)
+
+
 def diagnosis_table_document(dg: dict, spec) -> dict:
     from motorid.identify.results import json_safe as _clean
 

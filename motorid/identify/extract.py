@@ -117,11 +117,11 @@ class _Gathered:
 
 
 def _add_startability(g: _Gathered, r: int, key, cols, row: dict, settings) -> None:
+    theta = None
     if not np.isfinite(cols["theta_rad"]).any() and np.isfinite(g.theta_mean_torque):
-        g.theta_assumed.append(key)  # no shaft angle: the pressure torque's mean over θ (extract module doc)
-        event, why = startability_event(key, cols, settings, g.excluded, g.notes, theta=g.theta_mean_torque)
-    else:
-        event, why = startability_event(key, cols, settings, g.excluded, g.notes)
+        g.theta_assumed.append(key)  # no shaft angle: the pressure torque's mean over θ (mean_torque_angle)
+        theta = g.theta_mean_torque
+    event, why = startability_event(key, cols, settings, g.excluded, g.notes, theta=theta)
     row["excluded"] = why
     if event is not None:
         event["run"], event["run_index"] = key, r
@@ -341,7 +341,8 @@ def mean_torque_angle(pistons: int) -> float:
 
 def _note_assumed_angle(g: _Gathered) -> None:
     """Say where startability runs had no shaft angle (their breakaways taken at θ*)."""
-    used = [e for e in g.events if e["run"] in set(g.theta_assumed)]
+    assumed = set(g.theta_assumed)
+    used = [e for e in g.events if e["run"] in assumed]
     if used:
         g.notes.append(f"{len(used)} breakaway(s) without a shaft angle: the pressure torque is taken at its mean over "
                        f"the angle (D·ΔP/2π); the ripple about it, which these logs cannot place, widens the "

@@ -151,8 +151,7 @@ def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings |
     order = np.lexsort((t_all, codes))
     bounds = np.searchsorted(codes[order], np.arange(len(keys) + 1))
     numeric = [c for c in ("time_s", "speed_rad_s", "p_a_Pa", "p_b_Pa", "p_case_Pa", "torque_Nm", "q_a_m3_s",
-                           "q_b_m3_s", "q_case_m3_s", "oil_temp_C", "viscosity_Pa_s", "theta_rad")
-               if c in frame.columns]
+                           "q_b_m3_s", "q_case_m3_s", "oil_temp_C", "viscosity_Pa_s") if c in frame.columns]
     arrays = {c: frame[c].to_numpy(dtype=float) for c in numeric}
     for flag in (TEMPERATURE_ASSUMED, VISCOSITY_FROM_OIL):
         arrays[flag] = (frame[flag].to_numpy(dtype=bool) if flag in frame.columns
@@ -164,9 +163,8 @@ def operating_points(frame: pd.DataFrame, spec=None, settings: ExtractSettings |
                      "P − P_c)")
     temp = arrays["oil_temp_C"]
     spec_temp = getattr(getattr(spec, "oil", None), "temp_C", None)
-    if (spec_temp is not None and np.isfinite(temp).all() and temp.size and np.ptp(temp) == 0
-            and float(temp[0]) == float(spec_temp) and not arrays[VISCOSITY_FROM_OIL].size == 0
-            and arrays[VISCOSITY_FROM_OIL].all()):
+    if (spec_temp is not None and temp.size and np.isfinite(temp).all() and np.ptp(temp) == 0
+            and float(temp[0]) == float(spec_temp) and arrays[VISCOSITY_FROM_OIL].all()):
         # one temperature to the last digit over the whole campaign, the spec's own: a constant someone
         # typed (a channel map's [constants], an assumed value), not a reading; the points then carry none,
         # as a table that records none (a viscosity per recording may then be tried: docs/maps.md)
@@ -469,9 +467,8 @@ class LogPoints:
 
     def reasons(self) -> dict:
         """Why a parameter is not identified, in the words of these logs (replacing a table's)."""
-        out = {k: ("these logs hold no shaft angle: they are fitted as operating points (means over the shaft "
-                   "angle), and the K_L(θ) harmonics need flows recorded against it") for k in ("KL_a", "KL_b")}
-        return out
+        return {k: ("these logs hold no shaft angle: they are fitted as operating points (means over the shaft "
+                    "angle), and the K_L(θ) harmonics need flows recorded against it") for k in ("KL_a", "KL_b")}
 
 
 #: the reason extract gives a running run that has no shaft angle (identify/steady.py)
