@@ -93,16 +93,23 @@ def _folds(dataset, k: int) -> list[np.ndarray]:
     return [np.array(f, dtype=int) for f in folds]
 
 
-def _starts(current: dict, mech) -> list:
+def _starts(current: dict, mech, dataset=None) -> list:
     """Starting points for a candidate: the current fit with the mechanism at its
     typical size, smaller and larger, and the default start (a nonlinear
-    parameter such as a characteristic speed has local minima)."""
+    parameter such as a characteristic speed has local minima); for a mechanism
+    with a threshold in the data's own range (``data_starts``: a relief valve's
+    cracking pressure), also the current fit with it at quantiles of the runs' |ΔP|."""
     init = mech.initial()
     if getattr(mech, "single_start", False):  # linear in its parameters (a gain, an error ε): one start
         return [{**current, **init}]
     out = [{**current, **init}, dict(init)]
     for factor in (0.25, 4.0):
         out.append({**current, **{k: v * factor if mech.parameters[k].positive else v for k, v in init.items()}})
+    if dataset is not None and hasattr(mech, "data_starts"):
+        runs = dataset.runs
+        moving = np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)) > 0
+        dp = np.abs(runs["dp_median_Pa"].to_numpy(dtype=float))[moving]
+        out += [{**current, **s} for s in mech.data_starts(dp)]
     return out
 
 
@@ -172,10 +179,10 @@ SCREEN_FIT_AT_LEAST = 3
 SCREEN_FIT_SHARE = 0.01
 
 
-def _prediction_starts(current: dict, mech) -> list:
+def _prediction_starts(current: dict, mech, dataset=None) -> list:
     """The fit's starts and the mechanism at its neutral values (adding nothing: the linear
     response there is the score test's)."""
-    return _starts(current, mech) + [{**current, **mech.neutral()}]
+    return _starts(current, mech, dataset) + [{**current, **mech.neutral()}]
 
 
 def _screen_candidates(screen, catalog, current_mechs, current, channels, dataset, n_res, say,
@@ -194,14 +201,14 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
             and getattr(m, "seen_by", lambda ds: True)(dataset)]  # e.g. pump-mode law: no pump runs
     predicted = []
     for mech in bar(todo, desc="candidates (linear update)", unit="mechanism"):
-        chi2 = screen.predicted_chi2(current_mechs + [mech], _prediction_starts(current.params_all, mech))
+        chi2 = screen.predicted_chi2(current_mechs + [mech], _prediction_starts(current.params_all, mech, dataset))
         predicted.append((current.chi2 - chi2, mech))
     predicted.sort(key=lambda x: -x[0])
     top = predicted[0][0] if predicted else 0.0
     chosen = [m for i, (d, m) in enumerate(predicted) if i < SCREEN_FIT_AT_LEAST or d >= SCREEN_FIT_SHARE * top]
     fitted, ranked = [], []
     for mech in bar(chosen, desc="candidates (fit on the cells)", unit="mechanism"):
-        fit = screen.fit_best_start(current_mechs + [mech], _starts(current.params_all, mech))
+        fit = screen.fit_best_start(current_mechs + [mech], _starts(current.params_all, mech, dataset))
         d = current.chi2 - fit.chi2
         k = sum(1 for p in mech.parameters if p in fit.free)
         fitted.append(Candidate(mech, fit, d, d - k * np.log(n_res), scored_by="fit on the cells"))

@@ -58,7 +58,7 @@ def held_out_gains(table, spec, current: list, mech) -> dict:
             if c in after and before[c]["rms"] and after[c]["rms"] is not None}
 
 
-def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int = 4, candidates=None,
+def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int = 6, candidates=None,
                    progress=None, dataset=None, log_fit=None) -> dict:
     """Forward selection of catalog mechanisms on a table: add the mechanism that lowers the
     profiled BIC most, while it lowers it by at least ``min_evidence``, or, on a table alone, by

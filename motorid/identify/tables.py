@@ -286,6 +286,28 @@ def _linear_start(spec, table, names, mechanisms) -> dict:
     return start
 
 
+def _best_data_start(problem, free, values, mechanisms, table, train, w_table, w_logs) -> dict:
+    """The start of the fit: ``values``, or where a mechanism has a knee or a threshold that a
+    start far from it cannot find (``data_starts``, e.g. a relief valve's cracking pressure at
+    quantiles of the table's |ΔP|), the solution of the lowest cost over those starts (the
+    first-round weights) → values."""
+    starts = [s for m in mechanisms if hasattr(m, "data_starts")
+              for s in m.data_starts(np.abs(np.asarray(table.dp, dtype=float)[np.asarray(train, bool)]))]
+    starts = [s for s in starts if any(k in free for k in s)]
+    if not starts or not free:
+        return values
+    prob = problem(free)
+    lower = np.array([0.0 if model.parameter_info(k, mechanisms).positive else -np.inf for k in free])
+    best = None
+    for s in [{}] + starts:
+        x0 = np.array([s.get(k, values[k]) for k in free]) / prob.scales
+        x = prob.solve(x0, w_table, w_logs, lower)[0]
+        cost = float(np.sum(np.asarray(prob.residual(x, w_table, w_logs)) ** 2))
+        if np.isfinite(cost) and (best is None or cost < best[0]):
+            best = (cost, {k: float(x[i] * prob.scales[i]) for i, k in enumerate(free)})
+    return values if best is None else best[1]
+
+
 def noise_floor_and_scale(residuals, relative, dof_factor: float = 1.0, start: float | None = None):
     """(σ_floor, s) [unit of the residuals] maximizing the Gaussian likelihood of ``residuals``
     with σ_i² = σ_floor² + (s · relative_i)²; ``dof_factor`` (n/dof ≥ 1) inflates the squared
@@ -383,6 +405,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         return {c: np.where(has[c], 1.0 / point_sigma(c), 0.0) for c in TABLE_CHANNELS}
 
     values = {k: float(start[k]) for k in free}
+    values = _best_data_start(problem, free, values, mechanisms, table, train, weights(), w_logs)
     for round_ in range(max(rounds, 1) + 1):
         prob = problem(free)
         lower = np.array([0.0 if model.parameter_info(k, mechanisms).positive else -np.inf for k in free])

@@ -25,6 +25,7 @@ from motorid.physics.hydrodynamic import HydrodynamicTorque
 from motorid.physics.leakage import TurbulentLeakage
 from motorid.physics.lubrication import MixedLubricationFriction, PressureSpeedTorque
 from motorid.physics.mode import PumpModeFriction
+from motorid.physics.relief import ReliefValve
 from motorid.physics.ripple import MisalignmentRipple
 from motorid.physics import sensors, spec_errors
 from motorid.physics.sensors import TorqueOffset
@@ -46,6 +47,7 @@ _ALL = (
     FillingLoss(),
     PumpModeFriction(),
     FilmHeating(),  # the viscous loss bending over at high speed (real maps, issue 20)
+    ReliefValve(),  # flow past the motor above a cracking pressure (the MBARI recordings, issue 20)
     *spec_errors.MECHANISMS,  # displacement_error, leak_phase
     *sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, flow_meter_offset_a/b/case,
     #                       sensor_lag_<channel>
