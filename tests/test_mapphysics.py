@@ -261,9 +261,9 @@ def test_relief_valve_passes_nothing_below_its_setting_and_follows_its_override_
     p_r, c_r = 200 * BAR, 1e-10
     w = KNEE_SHARE * p_r
     dp = np.array([20, 100, 150, 170, 230, 260, 300]) * BAR
-    for speed in (3 * RPM, 3000 * RPM):
-        for sign in (1, -1):
-            d = _delta(mech, _samples(sign * speed, sign * dp), {"P_r": p_r, "C_r": c_r})
+    for speed in (3 * RPM, -3000 * RPM):
+        for sign in (1, -1):  # motor and pump mode in each direction of rotation
+            d = _delta(mech, _samples(speed, sign * dp), {"P_r": p_r, "C_r": c_r})
             q = sign * d["q_a"]
             low, high = dp <= p_r - 4 * w, dp >= p_r + 3 * w
             assert np.all(np.abs(q[low]) < 0.02 * c_r * w)
@@ -300,3 +300,31 @@ def test_relief_valve_is_found_and_its_setting_recovered_on_a_loss_map(tmp_path)
     ls = dg["fit"].ls
     for name in ("relief_valve.P_r", "relief_valve.C_r"):
         assert abs(ls.values[name] - truth[name]) < 4 * ls.std[name], (name, ls.values[name], ls.std[name])
+
+
+def test_relief_valve_is_not_named_for_a_leak_that_grows_faster_than_linearly(tmp_path):
+    """A cross-port leak ∝ ΔP|ΔP| (gaps that open under pressure; no catalog law): a relief valve's
+    softplus tail with its setting far above the map fits it (a smooth exponential in |ΔP|); a knee
+    that no point reaches is not a valve seen to open, so it is not named."""
+    import pandas as pd
+
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.discrepancy.tables import diagnose_table
+    from motorid.io.tables import read_table
+    from motorid.io.spec import OilSpec
+
+    spec = MotorSpec("map-9", 9, 80e-6, 0.005, oil=OilSpec(temp_C=50.0))
+    grid = map_grid([100, 500, 1000, 2000, 3000], [20, 80, 160, 240, 320], 4)
+    noise = {"torque_Nm": 0.3, "q_a_lpm": 0.05, "q_b_lpm": 0.05, "q_case_lpm": 0.02}
+    frame = pd.DataFrame(simulate_map(spec, BASE, grid, noise=noise, rng=np.random.default_rng(5)))
+    dp = frame["p_a_bar"] - frame["p_b_bar"]
+    extra = 0.3 * dp * dp.abs() / 320.0**2  # L/min, into the high-pressure port, out of the low one
+    frame["q_a_lpm"] += extra
+    frame["q_b_lpm"] -= extra
+    frame.to_csv(tmp_path / "map.csv", index=False)
+    rivals = ["turbulent_leakage", "compressibility_flow", "pressure_viscosity", "filling_loss", "relief_valve"]
+    dg = diagnose_table(read_table(tmp_path / "map.csv", spec), spec, max_mechanisms=2,
+                        candidates=[catalog.get(i) for i in rivals])
+    assert "relief_valve" not in [m.id for m in dg["mechanisms"]], dg["steps"]
+    skipped = [s for s in dg["steps"] if s["id"] == "relief_valve" and "skipped" in s]
+    assert skipped and "above every point" in skipped[0]["skipped"], dg["steps"]

@@ -207,12 +207,17 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
     top = predicted[0][0] if predicted else 0.0
     chosen = [m for i, (d, m) in enumerate(predicted) if i < SCREEN_FIT_AT_LEAST or d >= SCREEN_FIT_SHARE * top]
     fitted, ranked = [], []
+    abs_dp = np.abs(np.asarray(dataset.running.p_a, dtype=float) - np.asarray(dataset.running.p_b, dtype=float))
     for mech in bar(chosen, desc="candidates (fit on the cells)", unit="mechanism"):
         fit = screen.fit_best_start(current_mechs + [mech], _starts(current.params_all, mech, dataset))
+        cached_jit.release(mech)  # its compiled programs: memory does not grow with the catalog
+        beyond = getattr(mech, "outside_data", lambda v, x: None)(fit.values, abs_dp)
+        if beyond is not None:  # a threshold fitted past every run: its tail stands in for another law
+            say(f"{mech.id} left out: {beyond}")
+            continue
         d = current.chi2 - fit.chi2
         k = sum(1 for p in mech.parameters if p in fit.free)
         fitted.append(Candidate(mech, fit, d, d - k * np.log(n_res), scored_by="fit on the cells"))
-        cached_jit.release(mech)  # its compiled programs: memory does not grow with the catalog
     for d, mech in predicted:
         if mech not in chosen:
             k = len(mech.parameters)

@@ -58,6 +58,14 @@ def held_out_gains(table, spec, current: list, mech) -> dict:
             if c in after and before[c]["rms"] and after[c]["rms"] is not None}
 
 
+def _abs_dp(table, dataset) -> np.ndarray:
+    """|ΔP| [Pa] of the table's points and of the logs' running samples (a joint fit)."""
+    out = [np.abs(np.asarray(table.dp, dtype=float))]
+    if dataset is not None and dataset.n_running:
+        out.append(np.abs(np.asarray(dataset.running.p_a, dtype=float) - np.asarray(dataset.running.p_b, dtype=float)))
+    return np.concatenate(out)
+
+
 def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int = 6, candidates=None,
                    progress=None, dataset=None, log_fit=None) -> dict:
     """Forward selection of catalog mechanisms on a table: add the mechanism that lowers the
@@ -100,6 +108,10 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
                 steps.append({"id": mech.id, "skipped": f"{type(exc).__name__}: {exc}"[:200]})
                 continue
             if not any(tf.ls.identifiable.get(k) for k in mech.parameters):
+                continue
+            beyond = mech.outside_data(tf.ls.values, _abs_dp(table, dataset))
+            if beyond is not None:  # a threshold fitted past every point: its tail stands in for another law
+                steps.append({"id": mech.id, "skipped": beyond})
                 continue
             trials.append((_profile_bic(tf), mech, tf))
             if progress:

@@ -130,6 +130,13 @@ class Mechanism:
         meters' mass balance, which only a table of all three flows holds)."""
         return None
 
+    def outside_data(self, values: dict, abs_dp) -> str | None:
+        """Why fitted ``values`` describe no effect inside the data, whose pressure differences
+        are ``abs_dp`` (|ΔP| [Pa] of the points or runs): a threshold fitted beyond every point,
+        whose tail then stands in for some other smooth law (words), or None.  Diagnose does not
+        name a mechanism so fitted."""
+        return None
+
     def static_limit(self, params: dict, spec, events: Samples, limit):
         """Change the static friction limit T_break at breakaway events [N·m]."""
         return limit

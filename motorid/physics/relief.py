@@ -101,11 +101,28 @@ class ReliefValve(CatalogMechanism):
         return [{f"{self.id}.P_r": float(np.quantile(x, q)),
                  f"{self.id}.C_r": self.parameters[f"{self.id}.C_r"].typical} for q in START_QUANTILES]
 
+    def outside_data(self, values, abs_dp) -> str | None:
+        """The knee must lie inside the data: some point must reach P_r − 2w, where the valve
+        passes C_r·w/8.  A P_r fitted beyond every point makes the softplus tail a smooth
+        exponential in |ΔP|, which fits any cross-port flow that grows faster than linearly
+        (gaps that open under pressure): that is not a valve seen to open."""
+        x = np.asarray(abs_dp, dtype=float)
+        x = x[np.isfinite(x)]
+        p_r = self.value(values, "P_r")
+        opens = p_r * (1.0 - 2.0 * KNEE_SHARE)
+        if x.size and opens <= float(x.max()):
+            return None
+        top = float(x.max()) / BAR if x.size else 0.0
+        return (f"its knee (P_r − 2w = {opens / BAR:.4g} bar) lies above every point's |ΔP| (at most {top:.4g} bar): "
+                "the fit used its tail as a flow loss growing faster than linearly with |ΔP|, not a valve seen to open")
+
     def describe(self, values, spec=None) -> str:
         p_r, c_r = self.value(values, "P_r"), self.value(values, "C_r")
         w = KNEE_SHARE * p_r
         opening = float(relief_flow(p_r - 2 * w, p_r, c_r))
         return (f"a relief valve across the ports passes oil from the high- to the low-pressure port, past the "
-                f"motor: {opening / LPM:.2g} L/min at ΔP = {(p_r - 2 * w) / BAR:.4g} bar, rising along an override "
-                f"line of {c_r * 10 * BAR / LPM:.3g} L/min per 10 bar that crosses zero at {p_r / BAR:.4g} bar "
-                f"(C_r = {c_r:.3g} m³/(s·Pa), P_r = {p_r:.4g} Pa)")
+                f"motor, opening over ΔP ≈ {(p_r - 2 * w) / BAR:.4g}-{(p_r + 2 * w) / BAR:.4g} bar (a knee of assumed "
+                f"width, {100 * KNEE_SHARE:.0f} % of P_r: {opening / LPM:.2g} L/min at its foot) onto an override line "
+                f"of {c_r * 10 * BAR / LPM:.3g} L/min per 10 bar that crosses zero at {p_r / BAR:.4g} bar "
+                f"(C_r = {c_r:.3g} m³/(s·Pa), P_r = {p_r:.4g} Pa; a one-way valve reads as a two-way one "
+                "where only one direction reaches it)")
