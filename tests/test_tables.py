@@ -440,3 +440,39 @@ def test_noise_floor_and_scale_recover_both_parts_of_a_points_sigma():
             assert abs(f - floor) < 0.06 * floor, (f, floor)
         else:
             assert f < 0.02 * scale, f
+
+
+def test_the_map_report_says_what_diagnose_found(tmp_path):
+    """A table fit's report.html shows diagnose's document where it lies beside result.json: each
+    name with its words and parameters, what is left unexplained, the candidates left out and why."""
+    import json
+
+    from motorid.cli import main
+    from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
+    from motorid.io.tables import read_table
+    from motorid.physics.registry import get
+
+    hydro = get("hydrodynamic_torque")
+    truth = dict(TRUTH, **{"hydrodynamic_torque.C_h": 1e-4})
+    df = simulate_map(SPEC, truth, map_grid([100, 500, 1000, 2000, 3000], [20, 100, 200, 300], 2),
+                      mechanisms=(hydro,), noise=NOISE, rng=np.random.default_rng(4))
+    path = _write(df, tmp_path / "h.csv")
+    motor = tmp_path / "m.toml"
+    motor.write_text(SPEC.to_toml())
+    assert main(["fit", str(path), "--motor", str(motor), "--out", str(tmp_path / "fit")]) == 0
+    assert main(["report", str(tmp_path / "fit")]) == 0
+    assert 'id="diagnosis"' not in (tmp_path / "fit" / "report.html").read_text()  # diagnose not run
+    table = read_table(path, SPEC)
+    dg = diagnose_table(table, SPEC, candidates=[get("turbulent_leakage"), hydro, get("flow_meter_gain_a")],
+                        max_mechanisms=2)
+    doc = diagnosis_table_document(dg, SPEC)
+    (tmp_path / "fit" / "diagnosis.json").write_text(json.dumps(doc))
+    assert main(["report", str(tmp_path / "fit")]) == 0
+    page = (tmp_path / "fit" / "report.html").read_text()
+    section = page[page.index('<section id="diagnosis">'):]
+    section = section[:section.index("</section>")]
+    words = doc["mechanisms"][0]["description"]
+    assert [m["id"] for m in doc["mechanisms"]] == ["hydrodynamic_torque"]
+    assert "hydrodynamic_torque.C_h" in section and words.split(":")[0].replace("'", "&#x27;") in section
+    assert "Nothing: the residuals left are consistent with the noise" in section
+    assert "flow_meter_gain_a" in section and "mass balance" in section  # left out, with its reason

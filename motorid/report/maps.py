@@ -140,8 +140,51 @@ def _parameter_rows(doc: dict) -> str:
             "<th>identifiable</th></tr>" + "".join(rows) + "</table>")
 
 
-def render_map_report(doc: dict, tf) -> str:
-    """The report page of a fit with operating-point tables."""
+def diagnosis_section(diagnosis: dict | None) -> str:
+    """What ``motorid diagnose`` found on the tables (its diagnosis.json beside result.json): each
+    named mechanism in words with its parameters, what is left unexplained, and the candidates
+    left out and why; empty where diagnose was not run."""
+    if not isinstance(diagnosis, dict):
+        return ""
+    from motorid.report.causes import unexplained_words
+    from motorid.report.html import _mechanism
+
+    mechs = diagnosis.get("mechanisms") or []
+    body = ["<section id=\"diagnosis\"><h2>What diagnose found</h2>",
+            "<p>From diagnosis.json (<code>motorid diagnose</code>): physics and causes beyond the 1992 model, "
+            "each kept only where it lowers the BIC by 10 or more (docs/maps.md).</p>"]
+    if mechs:
+        for m in mechs:
+            words = m.get("description") if isinstance(m, dict) else None
+            body.append(_mechanism({k: v for k, v in m.items() if k not in ("description", "reference", "signature")})
+                        if isinstance(m, dict) else _mechanism(m))
+            if words:
+                body.append(f"<p>{_esc(words)}</p>")
+    else:
+        body.append("<p>None: no candidate mechanism earned its place.</p>")
+    body.append("<h3>Unexplained</h3>" + (unexplained_words(diagnosis.get("unexplained"))
+                                           or "<p>Nothing: the residuals left are consistent with the noise.</p>"))
+    left = [s for s in (diagnosis.get("selection") or {}).get("steps", []) if isinstance(s, dict) and "skipped" in s]
+    if left:
+        body.append("<h3>Left out</h3><ul>" + "".join(f"<li><code>{_esc(s['id'])}</code>: {_esc(s['skipped'])}</li>"
+                                                      for s in left) + "</ul>")
+    body.append("</section>")
+    return "\n".join(body)
+
+
+def _diagnosis_beside(out_dir) -> dict | None:
+    """diagnosis.json of ``out_dir``, where one is there and reads."""
+    import json
+
+    try:
+        return json.loads((Path(out_dir) / "diagnosis.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def render_map_report(doc: dict, tf, diagnosis: dict | None = None) -> str:
+    """The report page of a fit with operating-point tables (``diagnosis``: diagnose's document,
+    where it was run)."""
     from motorid.report.html import CSS
 
     plot = plot_efficiency_maps(tf.table, tf.table_prediction)
@@ -162,7 +205,7 @@ def render_map_report(doc: dict, tf) -> str:
              f'written {_dt.datetime.now().strftime("%Y-%m-%d %H:%M")}.</p>',
              "<section id=\"parameters\"><h2>Parameters</h2>", _parameter_rows(doc), "</section>",
              "<section id=\"efficiency-maps\"><h2>Efficiency maps</h2>", maps, "</section>",
-             comparison_section(doc), "</body></html>"]
+             diagnosis_section(diagnosis), comparison_section(doc), "</body></html>"]
     return "\n".join(parts) + "\n"
 
 
@@ -171,7 +214,7 @@ def write_map_report(out_dir, doc: dict, tf, spec=None) -> Path:
     from motorid._atomic import write_bytes_atomic
 
     path = Path(out_dir) / "report.html"
-    write_bytes_atomic(path, render_map_report(doc, tf).encode("utf-8"))
+    write_bytes_atomic(path, render_map_report(doc, tf, _diagnosis_beside(out_dir)).encode("utf-8"))
     return path
 
 
