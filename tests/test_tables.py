@@ -476,3 +476,9 @@ def test_the_map_report_says_what_diagnose_found(tmp_path):
     assert "hydrodynamic_torque.C_h" in section and words.split(":")[0].replace("'", "&#x27;") in section
     assert "Nothing: the residuals left are consistent with the noise" in section
     assert "flow_meter_gain_a" in section and "mass balance" in section  # left out, with its reason
+    # a diagnosis.json that does not read is said in the section, as the log report says it, and the
+    # rest of the report is written
+    (tmp_path / "fit" / "diagnosis.json").write_text("{not json")
+    assert main(["report", str(tmp_path / "fit")]) == 0
+    page = (tmp_path / "fit" / "report.html").read_text()
+    assert "not valid JSON" in page and 'id="comparison-table"' in page

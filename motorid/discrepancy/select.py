@@ -105,7 +105,7 @@ def _starts(current: dict, mech, dataset=None) -> list:
     out = [{**current, **init}, dict(init)]
     for factor in (0.25, 4.0):
         out.append({**current, **{k: v * factor if mech.parameters[k].positive else v for k, v in init.items()}})
-    if dataset is not None and hasattr(mech, "data_starts"):
+    if dataset is not None:
         runs = dataset.runs
         moving = np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)) > 0
         dp = np.abs(runs["dp_median_Pa"].to_numpy(dtype=float))[moving]
@@ -211,7 +211,7 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
     for mech in bar(chosen, desc="candidates (fit on the cells)", unit="mechanism"):
         fit = screen.fit_best_start(current_mechs + [mech], _starts(current.params_all, mech, dataset))
         cached_jit.release(mech)  # its compiled programs: memory does not grow with the catalog
-        beyond = getattr(mech, "outside_data", lambda v, x: None)(fit.values, abs_dp)
+        beyond = mech.outside_data(fit.values, abs_dp)
         if beyond is not None:  # a threshold fitted past every run: its tail stands in for another law
             say(f"{mech.id} left out: {beyond}")
             continue

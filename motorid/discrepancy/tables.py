@@ -97,6 +97,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             if why is not None:
                 cands.remove(mech)
                 steps.append({"id": mech.id, "skipped": why})
+    abs_dp = _abs_dp(table, dataset)  # where a threshold mechanism's knee must lie (outside_data)
     while len(current) < max_mechanisms:
         trials = []
         for mech in cands:
@@ -109,7 +110,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
                 continue
             if not any(tf.ls.identifiable.get(k) for k in mech.parameters):
                 continue
-            beyond = mech.outside_data(tf.ls.values, _abs_dp(table, dataset))
+            beyond = mech.outside_data(tf.ls.values, abs_dp)
             if beyond is not None:  # a threshold fitted past every point: its tail stands in for another law
                 steps.append({"id": mech.id, "skipped": beyond})
                 continue

@@ -291,8 +291,8 @@ def _best_data_start(problem, free, values, mechanisms, table, train, w_table, w
     start far from it cannot find (``data_starts``, e.g. a relief valve's cracking pressure at
     quantiles of the table's |ΔP|), the solution of the lowest cost over those starts (the
     first-round weights) → values."""
-    starts = [s for m in mechanisms if hasattr(m, "data_starts")
-              for s in m.data_starts(np.abs(np.asarray(table.dp, dtype=float)[np.asarray(train, bool)]))]
+    abs_dp = np.abs(np.asarray(table.dp, dtype=float)[np.asarray(train, bool)])
+    starts = [s for m in mechanisms for s in m.data_starts(abs_dp)]
     starts = [s for s in starts if any(k in free for k in s)]
     if not starts or not free:
         return values

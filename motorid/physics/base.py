@@ -130,6 +130,12 @@ class Mechanism:
         meters' mass balance, which only a table of all three flows holds)."""
         return None
 
+    def data_starts(self, abs_dp) -> list:
+        """Extra starting values from the data's pressure differences ``abs_dp`` (|ΔP| [Pa] of the
+        points or runs), for a parameter a start far from the data cannot find (a threshold, a
+        knee) → [{parameter: value}]; none by default."""
+        return []
+
     def outside_data(self, values: dict, abs_dp) -> str | None:
         """Why fitted ``values`` describe no effect inside the data, whose pressure differences
         are ``abs_dp`` (|ΔP| [Pa] of the points or runs): a threshold fitted beyond every point,

@@ -149,6 +149,9 @@ def diagnosis_section(diagnosis: dict | None) -> str:
     from motorid.report.causes import unexplained_words
     from motorid.report.html import _mechanism
 
+    if "unreadable" in diagnosis:
+        return (f"<section id=\"diagnosis\"><h2>What diagnose found</h2><p class=\"missing\">"
+                f"{_esc(diagnosis['unreadable'])}</p></section>")
     mechs = diagnosis.get("mechanisms") or []
     body = ["<section id=\"diagnosis\"><h2>What diagnose found</h2>",
             "<p>From diagnosis.json (<code>motorid diagnose</code>): physics and causes beyond the 1992 model, "
@@ -173,13 +176,18 @@ def diagnosis_section(diagnosis: dict | None) -> str:
 
 
 def _diagnosis_beside(out_dir) -> dict | None:
-    """diagnosis.json of ``out_dir``, where one is there and reads."""
-    import json
+    """diagnosis.json of ``out_dir`` where there is one (as the report of a log fit reads it:
+    report/evaluate.py); one that does not read → ``{"unreadable": why}``."""
+    from motorid.errors import InputError
+    from motorid.io.results import read_json
 
-    try:
-        return json.loads((Path(out_dir) / "diagnosis.json").read_text())
-    except (OSError, ValueError):
+    path = Path(out_dir) / "diagnosis.json"
+    if not path.exists():
         return None
+    try:
+        return read_json(path, "diagnosis.json")
+    except InputError as exc:
+        return {"unreadable": str(exc)}
 
 
 def render_map_report(doc: dict, tf, diagnosis: dict | None = None) -> str:
