@@ -264,12 +264,24 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
         if path is None:
             return lowered.compile(), None
         # an executable that came out of JAX's persistent compile cache serializes without
-        # its kernels: compile this one afresh (once; later runs load it from disk)
-        enabled = jax.config.jax_enable_compilation_cache
-        try:
-            jax.config.update("jax_enable_compilation_cache", False)
-            compiled = lowered.compile()
-        finally:
-            jax.config.update("jax_enable_compilation_cache", enabled)
+        # its kernels (it loads, then fails on its first run: "Function ... not found"):
+        # compile this one afresh (once; later runs load it from disk)
+        compiled = _compile_afresh(lowered)
         _save(path, compiled, lowered.as_text())
         return compiled, None
+
+
+def _compile_afresh(lowered):
+    """``lowered.compile()`` past JAX's persistent compile cache.  JAX decides once per process
+    whether it uses that cache (``compilation_cache.is_cache_used`` latches its first answer), so
+    turning the option off is not enough: the cache's state is reset on the way in and out."""
+    from jax.experimental.compilation_cache import compilation_cache as cc
+
+    enabled = jax.config.jax_enable_compilation_cache
+    try:
+        jax.config.update("jax_enable_compilation_cache", False)
+        cc.reset_cache()
+        return lowered.compile()
+    finally:
+        jax.config.update("jax_enable_compilation_cache", enabled)
+        cc.reset_cache()

@@ -6,6 +6,7 @@ import sys
 import textwrap
 
 import numpy as np
+import pytest
 
 
 SCRIPT = textwrap.dedent("""
@@ -121,3 +122,52 @@ def test_release_all_drops_only_what_the_disk_keeps(tmp_path):
     held, dropped, left, traces, same = _run(script, tmp_path / "cache")
     assert (held, dropped, left) == ("2", "1", "1")
     assert traces == "2" and same == "True"  # loaded from disk: no third trace
+
+
+TWIN_SCRIPT = textwrap.dedent("""
+    import sys
+    import jax.numpy as jnp
+    import numpy as np
+    from motorid._aot import cached_jit
+
+    TRACES = []
+
+    def f(x, tag):
+        TRACES.append(1)  # runs only while JAX traces
+        y = jnp.where(x > 1.5, jnp.sin(x) * 2.0, x + 1.0)  # the tag does not enter the program:
+        return jnp.cumsum(y) @ jnp.outer(y, x)  # both keys lower alike
+
+    jnp.sin(jnp.ones(3)).block_until_ready()  # an eager operation first: JAX turns its cache on
+    g = cached_jit(f)
+    for tag in sys.argv[1:]:
+        out = g(np.arange(4.0), tag)
+    print(len(TRACES), float(out[3]))
+""")
+
+
+def test_twin_programs_saved_from_one_process_load_in_the_next(tmp_path):
+    # two keys whose programs are identical: the second came out of JAX's persistent compile
+    # cache (filled by the first) unless motorid compiles past it (JAX decides on its first
+    # compile whether it uses that cache, and keeps to it), and such an executable
+    # serializes without its kernels ("Function ... not found" on its first run, then the file
+    # is deleted and compiled again in memory: a trace in every later process)
+    script = tmp_path / "twins.py"
+    script.write_text(TWIN_SCRIPT)
+    cache = tmp_path / "cache"
+    env = {**os.environ, "MOTORID_CACHE_DIR": str(cache)}
+
+    def run(*tags):
+        proc = subprocess.run([sys.executable, str(script), *tags], capture_output=True, text=True, env=env,
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        traces, value = proc.stdout.split()
+        return int(traces), float(value)
+
+    x = np.arange(4.0)
+    y = np.where(x > 1.5, np.sin(x) * 2.0, x + 1.0)
+    want = pytest.approx(float((np.cumsum(y) @ np.outer(y, x))[3]), rel=1e-12)
+    assert run("first", "second") == (2, want)  # both traced and compiled, in one process
+    assert len(list((cache / "aot").rglob("f-*.bin"))) == 2
+    assert run("second") == (0, want)  # loaded, and it runs: no trace
+    assert run("first") == (0, want)
+    assert len(list((cache / "aot").rglob("f-*.bin"))) == 2
