@@ -193,13 +193,12 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
     """
     from motorid.identify.least_squares import FitOptions
     from motorid.identify.pipeline import identify
-    from motorid.identify.results import result_document
 
     spec = _spec(motor)
     logs = [logs] if isinstance(logs, (str, Path)) else list(logs)
     from motorid.io.tables import split_logs_and_tables
 
-    from motorid.identify.log_points import (angle_missing_everywhere, mixed_angle_warning, points_from_logs,
+    from motorid.identify.log_points import (angle_missing_everywhere, points_from_logs,
                                              reduce_logs_without_angle)
     from motorid.io.tables import split_channel_map
 
@@ -222,10 +221,19 @@ def fit(logs: Sequence, motor, *, bayes: bool = False, harmonics: int | None = N
     if angle_missing_everywhere(res.dataset):  # an empty angle channel the header did not tell
         reduced = points_from_logs(log_paths, spec, channels, known=True)
         return with_points(reduced.logs_for_breakaways(log_paths), [reduced.path], reduced)
+    return _log_fit_result(res, spec, logs, _motor_input(motor, motor_path), channels)
+
+
+def _log_fit_result(res, spec, logs, motor_input, channels) -> FitResult:
+    """result.json of a fit of bench logs (an :class:`~motorid.identify.pipeline.Identification`), as
+    ``motorid fit`` writes it."""
+    from motorid.identify.log_points import mixed_angle_warning
+    from motorid.identify.results import result_document
+
     note = mixed_angle_warning(res.dataset)
-    if note:
+    if note and note not in res.ls.warnings:
         res.ls.warnings.append(note)
-    inputs = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}
+    inputs = {"logs": [str(p) for p in logs], "motor": motor_input}
     if channels is not None:
         inputs["channels"] = str(channels)
     doc = result_document(res.ls, spec, res.dataset, res.bayes, inputs, res.seconds, res.priors)
@@ -262,6 +270,8 @@ class DiagnosisResult:
         self.arrays = arrays or {}
         self.diagnosis = diagnosis
         self.log_points = None  # LogPoints where the logs held no shaft angle (identify/log_points.py)
+        # the fit of the diagnosed model (a FitResult, bench logs only): the result.json diagnose writes
+        self.refit = None
 
     @property
     def mechanisms(self) -> list:
@@ -337,4 +347,12 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
     dg = _diagnose(dataset, spec, alpha=alpha, min_evidence=min_evidence, progress=progress)
     doc = diagnosis_document(dg, spec)
     doc["inputs"] = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}
-    return DiagnosisResult(doc, residual_arrays(dg, dataset), dg)
+    result = DiagnosisResult(doc, residual_arrays(dg, dataset), dg)
+    # the final model's fit, as `motorid fit --mechanism ...` writes it: diagnose's own final fit (every
+    # sample, noise re-estimated), not a second reading and fit of the same logs
+    from motorid.identify.pipeline import Identification, add_fit_warnings
+
+    final = add_fit_warnings(dg.final, dataset, frame)
+    ident = Identification(final, None, dataset, frame, dg.seconds.get("final fit", 0.0), {})
+    result.refit = _log_fit_result(ident, spec, logs, _motor_input(motor, motor_path), channels)
+    return result

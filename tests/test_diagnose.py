@@ -102,6 +102,20 @@ def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys):
     assert res["fit"]["mechanisms"] == ["torque_offset"] and "result.json (the fit with torque_offset" in out
     t0 = res["parameters"]["torque_offset.T0"]
     assert abs(t0["value"] - m["parameters"]["torque_offset.T0"]["value"]) < 0.1 * t0["std"]
+    # it is diagnose's own final fit, not a second reading and fit of the logs: the same numbers as
+    # `motorid fit --mechanism torque_offset` on the same log, the same warnings
+    from motorid import api
+
+    own = api.fit(ROOT / name / "campaign.csv.gz", ROOT / name / "motor.toml", mechanisms=["torque_offset"]).document
+    assert set(own["parameters"]) == set(res["parameters"])
+    for k, e in own["parameters"].items():
+        if e["identifiable"]:
+            assert abs(res["parameters"][k]["value"] - e["value"]) < 1e-3 * e["std"], k
+            assert res["parameters"][k]["std"] == pytest.approx(e["std"], rel=1e-3), k
+        else:
+            assert not res["parameters"][k]["identifiable"], k
+    assert res["fit"]["warnings"] == own["fit"]["warnings"]
+    assert res["fit"]["chi2"] == pytest.approx(own["fit"]["chi2"], rel=1e-9)
     points = tmp_path / "points.csv"
     points.write_text("point_id,speed_rpm,p_a_bar,p_b_bar,oil_temp_C\nP1,1000,150,5,50\n")
     assert main(["predict", str(tmp_path), str(points), "--out", str(tmp_path / "pred.csv")]) == 0

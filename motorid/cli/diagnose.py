@@ -51,18 +51,20 @@ def run(args) -> int:
     drop_stale_points(out, result.log_points)
     print(result)
     print(f"wrote {out / DIAGNOSIS_FILE}")
-    write_refit(out, args, spec, [m["id"] for m in result.document.get("mechanisms", [])])
+    write_refit(out, args, spec, [m["id"] for m in result.document.get("mechanisms", [])], result.refit)
     return 0
 
 
-def write_refit(out: Path, args, spec, mechanisms: list) -> None:
+def write_refit(out: Path, args, spec, mechanisms: list, refit=None) -> None:
     """result.json beside diagnosis.json: the fit of the same logs with the mechanisms diagnose named, so
     that `motorid predict`, `report` and `export` take the diagnosed model (a fit, as `motorid fit` writes
-    it; an empirical term of an unexplained entry is not in it).  Tables: cli/tables.py."""
+    it; an empirical term of an unexplained entry is not in it): ``refit``, diagnose's own final fit,
+    where given, else fitted here.  Tables: cli/tables.py."""
     from motorid import api
     from motorid.io.results import RESULT_FILE
 
-    refit = api.fit(args.logs, spec, mechanisms=mechanisms, motor_path=args.motor, channels=args.channels)
+    if refit is None:
+        refit = api.fit(args.logs, spec, mechanisms=mechanisms, motor_path=args.motor, channels=args.channels)
     refit.document["fit"]["from_diagnose"] = True
     target = refit_folder(out)
     refit.save(target)

@@ -139,12 +139,14 @@ class Screen:
 
     def _parameters(self, mechanisms, initial: dict, hold=()) -> tuple:
         """(start, free, held, reasons) of the base model plus ``mechanisms`` from ``initial``:
-        what the data cannot see is held (``coverage_reasons``, asked once per parameter set;
+        what the data cannot see is held (``coverage_reasons``, asked once per set of base parameters;
         ``reasons`` is a fresh dict, which the solver may add to), and ``hold`` at ``initial``."""
         names, start = start_values(self.spec, mechanisms, self.options, initial)
-        key = tuple(names)
+        # what the data cannot see is asked of the 1992 model's parameters alone (a mechanism's,
+        # "id.name", are never among coverage_reasons' answers): once for every candidate
+        key = tuple(k for k in names if "." not in k)
         if key not in self._coverage:
-            self._coverage[key] = coverage_reasons(self.dataset, self.spec, names)
+            self._coverage[key] = coverage_reasons(self.dataset, self.spec, key)
         reasons = dict(self._coverage[key])
         held = {k: start[k] for k in names if k in reasons or k in hold}
         return start, [k for k in names if k not in held], held, reasons

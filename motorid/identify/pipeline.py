@@ -114,6 +114,15 @@ def torque_gain_warning(dataset, ls) -> str:
     return one_back_pressure_warning(low, ls.values["KF"])
 
 
+def add_fit_warnings(ls: FitResult, dataset, frame) -> FitResult:
+    """Append to ``ls.warnings`` what the data behind a fit warn of (the oil model's viscosity, one
+    back pressure) → ``ls``."""
+    for note in (viscosity_model_warning(frame, dataset, ls), torque_gain_warning(dataset, ls)):
+        if note and note not in ls.warnings:
+            ls.warnings.append(note)
+    return ls
+
+
 def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | None = None,
              mechanisms: Sequence = (), seed: int = 0, progress: bool | None = None,
              dataset=None, frame=None, channels=None) -> Identification:
@@ -132,9 +141,7 @@ def identify(paths: Sequence, spec, bayes: bool = False, options: FitOptions | N
         ls = fit_cells(dataset, spec, mechanisms=mechanisms, options=options)
     else:
         ls = fit_least_squares(dataset, spec, mechanisms=mechanisms, options=options)
-    for note in (viscosity_model_warning(frame, dataset, ls), torque_gain_warning(dataset, ls)):
-        if note:
-            ls.warnings.append(note)
+    add_fit_warnings(ls, dataset, frame)
     post, priors = None, {}
     if bayes and ls.free:
         from motorid.identify.bayes import prior_scale, sample_posterior
