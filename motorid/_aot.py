@@ -126,9 +126,14 @@ def _load(path: Path):
 
             initialize_lapack()
             _lapack_ready = True
-        return serialize_executable.deserialize_and_load(data, in_tree, out_tree)
+        loaded = serialize_executable.deserialize_and_load(data, in_tree, out_tree)
     except Exception:  # noqa: BLE001 - a stale or foreign file: compile instead
         return None
+    try:  # its modification time says when it was last used (motorid._cachesize prunes by it)
+        os.utime(path)
+    except OSError:
+        pass
+    return loaded
 
 
 def _save(path: Path, compiled, hlo_text: str) -> None:

@@ -1,7 +1,8 @@
 """JAX set-up shared by every module: float64 and a persistent compile cache.
 
 The cache lives in ``$MOTORID_CACHE_DIR`` (default ``~/.cache/motorid/jax``) so
-that a second CLI run does not pay the XLA compiles again.
+that a second CLI run does not pay the XLA compiles again; it is kept below
+``$MOTORID_CACHE_MAX_MB`` (default 2048) by :mod:`motorid._cachesize`.
 """
 
 import os
@@ -21,3 +22,7 @@ try:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 except (OSError, AttributeError):  # read-only home: run without the cache
     pass
+else:  # a size cap, looked at once a day (motorid._cachesize; MOTORID_CACHE_MAX_MB)
+    from motorid._cachesize import prune_now_and_then
+
+    prune_now_and_then(_cache)

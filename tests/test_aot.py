@@ -171,3 +171,48 @@ def test_twin_programs_saved_from_one_process_load_in_the_next(tmp_path):
     assert run("second") == (0, want)  # loaded, and it runs: no trace
     assert run("first") == (0, want)
     assert len(list((cache / "aot").rglob("f-*.bin"))) == 2
+
+
+def test_cache_is_pruned_to_its_cap_oldest_first(tmp_path, monkeypatch):
+    from motorid import _cachesize
+
+    root = tmp_path / "cache"
+    (root / "aot" / "v1").mkdir(parents=True)
+    (root / "aot" / "v2").mkdir(parents=True)
+    files = [root / f"jit_f-{i}-cache" for i in range(6)] + [root / "aot" / "v1" / "old.bin",
+                                                             root / "aot" / "v2" / "new.bin"]
+    for age, f in zip((90, 80, 70, 60, 50, 40, 100, 10), files):  # minutes ago
+        f.write_bytes(b"x" * 100_000)
+        t = 1_000_000.0 - age * 60
+        os.utime(f, (t, t))
+    cap = 500_000  # the folder holds 800 000 bytes: down to 80 % of the cap, oldest first
+    assert _cachesize.prune(root, cap) == 400_000
+    left = sorted(p.name for p in root.rglob("*") if p.is_file())
+    assert left == ["jit_f-3-cache", "jit_f-4-cache", "jit_f-5-cache", "new.bin"]
+    assert not (root / "aot" / "v1").exists()  # an emptied folder goes too
+    assert _cachesize.prune(root, cap) == 0  # under the cap: nothing
+
+    # once a day, by the marker's age; MOTORID_CACHE_MAX_MB sets the cap, 0 lifts it
+    monkeypatch.setenv("MOTORID_CACHE_MAX_MB", str(250_000 / 2**20))  # 400 000 bytes held: two go
+    assert _cachesize.prune_now_and_then(root, now=2_000_000.0) == 200_000
+    assert sorted(p.name for p in root.rglob("*-cache")) == ["jit_f-5-cache"]
+    assert _cachesize.prune_now_and_then(root, now=2_000_000.0 + 3600) == 0  # checked an hour ago
+    (root / "a-cache").write_bytes(b"x" * 300_000)
+    assert _cachesize.prune_now_and_then(root, now=2_000_000.0 + 2 * 86400) > 0
+    monkeypatch.setenv("MOTORID_CACHE_MAX_MB", "0")
+    assert _cachesize.max_bytes() is None and _cachesize.prune_now_and_then(root, now=3e6) == 0
+    monkeypatch.setenv("MOTORID_CACHE_MAX_MB", "lots")  # never stops a run: the default
+    assert _cachesize.max_bytes() == _cachesize.DEFAULT_MAX_MB * 2**20
+
+
+def test_a_pruned_program_is_compiled_again_and_a_loaded_one_marked_used(tmp_path):
+    script = tmp_path / "prog.py"
+    script.write_text(SCRIPT)
+    cache = tmp_path / "cache"
+    assert _run(script, cache) == ["1", "12.0"]
+    (path,) = list((cache / "aot").rglob("f-*.bin"))
+    os.utime(path, (1e6, 1e6))
+    assert _run(script, cache) == ["0", "12.0"]  # loaded: its time says it was used now
+    assert path.stat().st_mtime > 1e9
+    path.unlink()  # pruned
+    assert _run(script, cache) == ["1", "12.0"]

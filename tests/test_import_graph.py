@@ -19,7 +19,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "motorid"
 
 #: lowest first: physics ← model ← io / bench / identify ← discrepancy ← report ← api ← cli
 LAYERS = (
-    ("foundation", {"errors", "units", "_atomic", "_jaxconfig", "_aot", "_version", "robust", "progress"}),
+    ("foundation", {"errors", "units", "_atomic", "_jaxconfig", "_cachesize", "_aot", "_version", "robust", "progress"}),
     ("physics", {"physics"}),
     ("model", {"model"}),
     ("edge", {"io", "bench", "identify"}),
