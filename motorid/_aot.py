@@ -32,6 +32,7 @@ import hashlib
 import os
 import pickle
 import platform
+import threading
 from pathlib import Path
 
 import jax
@@ -276,17 +277,21 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
         return compiled, None
 
 
+_AFRESH = threading.Lock()  # one at a time: the setting and the cache's state are global
+
+
 def _compile_afresh(lowered):
     """``lowered.compile()`` past JAX's persistent compile cache.  JAX decides once per process
     whether it uses that cache (``compilation_cache.is_cache_used`` latches its first answer), so
     turning the option off is not enough: the cache's state is reset on the way in and out."""
     from jax.experimental.compilation_cache import compilation_cache as cc
 
-    enabled = jax.config.jax_enable_compilation_cache
-    try:
-        jax.config.update("jax_enable_compilation_cache", False)
-        cc.reset_cache()
-        return lowered.compile()
-    finally:
-        jax.config.update("jax_enable_compilation_cache", enabled)
-        cc.reset_cache()
+    with _AFRESH:
+        enabled = jax.config.jax_enable_compilation_cache
+        try:
+            jax.config.update("jax_enable_compilation_cache", False)
+            cc.reset_cache()
+            return lowered.compile()
+        finally:
+            jax.config.update("jax_enable_compilation_cache", enabled)
+            cc.reset_cache()

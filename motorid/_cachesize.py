@@ -5,14 +5,16 @@ file per program and argument shape (eager operations on a campaign's own row co
 and :mod:`motorid._aot` one serialized executable per program, static arguments and padded
 shape.  A fleet of campaigns of many sizes, re-tested over years, would fill a disk.  Once a day
 (a marker file's age says when it last looked) the folder is measured, and where it holds more
-than ``MOTORID_CACHE_MAX_MB`` (default :data:`DEFAULT_MAX_MB`) the files used longest ago are
-deleted until it holds 80 % of that.  "Used" is a file's modification time: JAX's files carry
-the time they were written, motorid's executables the time they were last loaded (:mod:`motorid._aot`
-touches a file it loads).  A deleted program is compiled again when next needed, nothing else.
+than ``MOTORID_CACHE_MAX_MB`` (default :data:`DEFAULT_MAX_MB`) the cache entries used longest
+ago are deleted until they hold 80 % of that (JAX's ``*-cache`` and ``*-atime`` files and
+motorid's ``aot/<version>/*.bin``; any other file in the folder is left alone).  "Used" is a file's modification time: JAX's files carry
+the time they were written (an entry read on every run is not kept longer for that), motorid's
+executables the time they were last loaded (:mod:`motorid._aot` touches a file it loads).  A deleted program is compiled again when next needed, nothing else.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from pathlib import Path
@@ -34,49 +36,72 @@ def max_bytes() -> int | None:
         mb = float(value) if value else DEFAULT_MAX_MB
     except ValueError:
         mb = DEFAULT_MAX_MB
+    if not math.isfinite(mb):  # "inf": no cap; "nan": the default
+        return None if mb > 0 else DEFAULT_MAX_MB * 2**20
     return int(mb * 2**20) if mb > 0 else None
 
 
-def _files(root: Path) -> list:
-    """(mtime, size, path) of every file under ``root`` but the marker."""
-    out = []
+def _ours(root: Path, folder: str, name: str) -> bool:
+    """Whether a file is a cache entry: JAX's (``*-cache``, ``*-atime`` in the folder itself) or
+    motorid's (``aot/<version>/*.bin``).  Anything else is left alone, should the variable point
+    at a folder that holds other files too."""
+    where = Path(folder)
+    if where == root:
+        return name.endswith(("-cache", "-atime"))
+    return name.endswith(".bin") and where.parent == root / "aot"
+
+
+def _entries(root: Path) -> list:
+    """(mtime, size, paths) of every cache entry under ``root`` (:func:`_ours`): a JAX entry's
+    ``-cache`` and ``-atime`` files are one (deleted together: JAX's own eviction fails on a
+    ``-cache`` without its ``-atime``), with the later time and the two sizes."""
+    grouped: dict = {}
     for folder, _, names in os.walk(root):
         for name in names:
-            if name == MARKER:
+            if not _ours(root, folder, name):
                 continue
             path = os.path.join(folder, name)
             try:
                 st = os.stat(path)
             except OSError:
                 continue
-            out.append((st.st_mtime, st.st_size, path))
-    return out
+            key = path.removesuffix("-cache").removesuffix("-atime") if Path(folder) == root else path
+            t, size, paths = grouped.get(key, (-math.inf, 0, []))
+            grouped[key] = (max(t, st.st_mtime), size + st.st_size, paths + [path])
+    return list(grouped.values())
 
 
 def prune(root, cap: int, keep: float = PRUNE_TO) -> int:
-    """Delete the files under ``root`` used longest ago (oldest modification time first) while it
-    holds more than ``cap`` bytes, down to ``keep`` × ``cap`` → bytes deleted.  Folders emptied
-    on the way are removed; a file that cannot be deleted is passed over."""
+    """Delete the cache entries under ``root`` used longest ago (oldest modification time first)
+    while they hold more than ``cap`` bytes, down to ``keep`` × ``cap`` → bytes deleted.  Version
+    folders of :mod:`motorid._aot` emptied on the way are removed; a file that cannot be deleted is
+    passed over; no other file is touched (:func:`_ours`)."""
     root = Path(root)
-    files = _files(root)
-    total = sum(size for _, size, _ in files)
+    entries = _entries(root)
+    total = sum(size for _, size, _ in entries)
     if total <= cap:
         return 0
     target, freed = keep * cap, 0
-    for _, size, path in sorted(files):
+    for _, size, paths in sorted(entries, key=lambda e: e[0]):
         if total - freed <= target:
             break
-        try:
-            os.unlink(path)
-        except OSError:
-            continue
-        freed += size
-    for folder, dirs, names in os.walk(root, topdown=False):
-        if Path(folder) != root and not dirs and not names:
+        gone = True
+        for path in paths:
             try:
-                os.rmdir(folder)
-            except OSError:
+                os.unlink(path)
+            except FileNotFoundError:  # another process pruning at once took it: freed all the same
                 pass
+            except OSError:
+                gone = False
+        if gone:
+            freed += size
+    aot = root / "aot"
+    for folder in (aot.iterdir() if aot.is_dir() else ()):  # a version folder emptied on the way
+        try:
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
+        except OSError:
+            pass
     return freed
 
 

@@ -23,6 +23,9 @@ try:
 except (OSError, AttributeError):  # read-only home: run without the cache
     pass
 else:  # a size cap, looked at once a day (motorid._cachesize; MOTORID_CACHE_MAX_MB)
-    from motorid._cachesize import prune_now_and_then
+    try:
+        from motorid._cachesize import prune_now_and_then
 
-    prune_now_and_then(_cache)
+        prune_now_and_then(_cache)
+    except Exception:  # noqa: BLE001 - housekeeping never stops a run
+        pass

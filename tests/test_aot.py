@@ -185,17 +185,24 @@ def test_cache_is_pruned_to_its_cap_oldest_first(tmp_path, monkeypatch):
         f.write_bytes(b"x" * 100_000)
         t = 1_000_000.0 - age * 60
         os.utime(f, (t, t))
-    cap = 500_000  # the folder holds 800 000 bytes: down to 80 % of the cap, oldest first
+    for f in (root / "notes.txt", root / "aot" / "readme.txt", root / "sub" / "x-cache"):
+        f.parent.mkdir(exist_ok=True)  # not cache entries (a folder shared by mistake): never touched
+        f.write_bytes(b"y" * 1_000_000)
+        os.utime(f, (1.0, 1.0))
+    cap = 500_000  # the entries hold 800 000 bytes: down to 80 % of the cap, oldest first
     assert _cachesize.prune(root, cap) == 400_000
-    left = sorted(p.name for p in root.rglob("*") if p.is_file())
+    left = sorted(p.name for p in root.rglob("*") if p.is_file() and p.read_bytes()[:1] == b"x")
     assert left == ["jit_f-3-cache", "jit_f-4-cache", "jit_f-5-cache", "new.bin"]
+    assert all(f.exists() for f in (root / "notes.txt", root / "aot" / "readme.txt", root / "sub" / "x-cache"))
+    for f in (root / "aot" / "readme.txt", root / "notes.txt"):
+        f.unlink()
     assert not (root / "aot" / "v1").exists()  # an emptied folder goes too
     assert _cachesize.prune(root, cap) == 0  # under the cap: nothing
 
     # once a day, by the marker's age; MOTORID_CACHE_MAX_MB sets the cap, 0 lifts it
     monkeypatch.setenv("MOTORID_CACHE_MAX_MB", str(250_000 / 2**20))  # 400 000 bytes held: two go
     assert _cachesize.prune_now_and_then(root, now=2_000_000.0) == 200_000
-    assert sorted(p.name for p in root.rglob("*-cache")) == ["jit_f-5-cache"]
+    assert sorted(p.name for p in root.glob("*-cache")) == ["jit_f-5-cache"]
     assert _cachesize.prune_now_and_then(root, now=2_000_000.0 + 3600) == 0  # checked an hour ago
     (root / "a-cache").write_bytes(b"x" * 300_000)
     assert _cachesize.prune_now_and_then(root, now=2_000_000.0 + 2 * 86400) > 0
@@ -203,6 +210,26 @@ def test_cache_is_pruned_to_its_cap_oldest_first(tmp_path, monkeypatch):
     assert _cachesize.max_bytes() is None and _cachesize.prune_now_and_then(root, now=3e6) == 0
     monkeypatch.setenv("MOTORID_CACHE_MAX_MB", "lots")  # never stops a run: the default
     assert _cachesize.max_bytes() == _cachesize.DEFAULT_MAX_MB * 2**20
+    monkeypatch.setenv("MOTORID_CACHE_MAX_MB", "inf")
+    assert _cachesize.max_bytes() is None
+
+
+def test_a_jax_entry_goes_with_its_access_time_file(tmp_path):
+    # JAX's own eviction reads the -atime file of every -cache file: the two go together, and an
+    # entry another process deleted meanwhile counts as freed (no newer entry goes in its place)
+    from motorid import _cachesize
+
+    root = tmp_path / "cache"
+    root.mkdir()
+    for i, age in enumerate((30, 20, 10)):
+        for suffix, size in (("-cache", 100_000), ("-atime", 8)):
+            f = root / f"jit_g-{i}{suffix}"
+            f.write_bytes(b"x" * size)
+            os.utime(f, (1e6 - age * 60, 1e6 - age * 60))
+    assert _cachesize.prune(root, 200_000) == 200_016  # 300 024 bytes → at most 160 000: two entries
+    assert sorted(p.name for p in root.iterdir()) == ["jit_g-2-atime", "jit_g-2-cache"]
+    entries = _cachesize._entries(root)
+    assert len(entries) == 1 and entries[0][1] == 100_008
 
 
 def test_a_pruned_program_is_compiled_again_and_a_loaded_one_marked_used(tmp_path):

@@ -76,10 +76,19 @@ def test_clean_campaigns_raise_no_false_alarm(name):
     assert doc["mismatch"] is False and doc["mechanisms"] == [] and doc["unexplained"] == []
 
 
-def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys):
+def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys, monkeypatch):
+    from motorid import api
+
     name = "torque_offset"
+    fit = api.fit
+
+    def no_second_fit(*args, **kwargs):
+        raise AssertionError("diagnose fitted the logs a second time for its result.json")
+
+    monkeypatch.setattr(api, "fit", no_second_fit)
     rc = main(["diagnose", str(ROOT / name / "campaign.csv.gz"), "--motor", str(ROOT / name / "motor.toml"),
                "--out", str(tmp_path)])
+    monkeypatch.setattr(api, "fit", fit)
     out = capsys.readouterr().out
     assert rc == 0
     doc = json.loads((tmp_path / "diagnosis.json").read_text())
@@ -102,10 +111,9 @@ def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys):
     assert res["fit"]["mechanisms"] == ["torque_offset"] and "result.json (the fit with torque_offset" in out
     t0 = res["parameters"]["torque_offset.T0"]
     assert abs(t0["value"] - m["parameters"]["torque_offset.T0"]["value"]) < 0.1 * t0["std"]
-    # it is diagnose's own final fit, not a second reading and fit of the logs: the same numbers as
-    # `motorid fit --mechanism torque_offset` on the same log, the same warnings
-    from motorid import api
-
+    # it is diagnose's own final fit (api.fit was not called above), not a second reading and fit of
+    # the logs: the same numbers as `motorid fit --mechanism torque_offset` on the same log, the same warnings
+    assert res["fit"]["seconds"] == pytest.approx(doc["seconds"]["final fit"])
     own = api.fit(ROOT / name / "campaign.csv.gz", ROOT / name / "motor.toml", mechanisms=["torque_offset"]).document
     assert set(own["parameters"]) == set(res["parameters"])
     for k, e in own["parameters"].items():
