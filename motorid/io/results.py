@@ -29,6 +29,18 @@ def read_json(path, what: str) -> dict:
         raise InputError(f"{path}: not valid JSON ({exc})") from None
 
 
+def read_diagnosis_beside(folder) -> tuple[dict | None, str | None]:
+    """The diagnosis.json of a result folder, where diagnose wrote one → (its document, None);
+    (None, None) where there is none; (None, the one-line reason) where it does not read."""
+    path = Path(folder) / DIAGNOSIS_FILE
+    if not path.exists():
+        return None, None
+    try:
+        return read_json(path, DIAGNOSIS_FILE), None
+    except InputError as exc:
+        return None, str(exc)
+
+
 def write_json(doc: dict, path) -> Path:
     """Write ``doc`` to ``path`` as indented JSON (no NaN), atomically: a temporary file, then a rename."""
     text = json.dumps(doc, indent=1, allow_nan=False) + "\n"

@@ -22,7 +22,7 @@ import numpy as np
 
 from motorid import model
 from motorid.errors import InputError
-from motorid.io.results import read_json
+from motorid.io.results import read_diagnosis_beside, read_json
 from motorid.robust import robust_std as _robust_std
 from motorid.units import PA_PER_BAR, RUNNING_CHANNELS
 
@@ -237,13 +237,9 @@ def gather(out_dir, identification=None, spec=None, logs=None, motor=None) -> Re
     if draws is None:
         source = ""
     truth = _truth_beside((doc.get("inputs") or {}).get("logs"))
-    diagnosis = None
-    diag_path = out / "diagnosis.json"
-    if diag_path.exists():
-        try:
-            diagnosis = read_json(diag_path, "diagnosis.json")
-        except InputError as exc:
-            notes.append(str(exc))
+    diagnosis, unreadable = read_diagnosis_beside(out)
+    if unreadable:
+        notes.append(unreadable)
     rd = ReportData(out, doc, spec, dataset, params, mechanisms, list(names), draws, source, chain,
                     burn or 0, thin or 1, posterior, inliers, diagnosis, truth, notes)
     evaluate_data(rd, identification.ls if identification is not None else None)

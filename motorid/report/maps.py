@@ -176,18 +176,12 @@ def diagnosis_section(diagnosis: dict | None) -> str:
 
 
 def _diagnosis_beside(out_dir) -> dict | None:
-    """diagnosis.json of ``out_dir`` where there is one (as the report of a log fit reads it:
-    report/evaluate.py); one that does not read → ``{"unreadable": why}``."""
-    from motorid.errors import InputError
-    from motorid.io.results import read_json
+    """diagnosis.json of ``out_dir`` where there is one (:func:`~motorid.io.results.read_diagnosis_beside`,
+    as the report of a log fit reads it); one that does not read → ``{"unreadable": why}``."""
+    from motorid.io.results import read_diagnosis_beside
 
-    path = Path(out_dir) / "diagnosis.json"
-    if not path.exists():
-        return None
-    try:
-        return read_json(path, "diagnosis.json")
-    except InputError as exc:
-        return {"unreadable": str(exc)}
+    doc, unreadable = read_diagnosis_beside(out_dir)
+    return {"unreadable": unreadable} if unreadable else doc
 
 
 def render_map_report(doc: dict, tf, diagnosis: dict | None = None) -> str:
