@@ -52,6 +52,8 @@ SIZES = {
     "flow_meter_offset_case": ("flow_meter_offset_case", "offset", "q_case", None, (1e-7, -2e-7)),
     "extra_torque_order3_dp": ("extra_torque_order3_dp", "extra", "torque_order3_dp", None, (1e-8,)),
     "extra_case_leak_pa_pb": ("extra_case_leak_pa_pb", "extra", "case_leak_pa_pb", None, (2.5e-20,)),
+    # true rotor inertia / the spec's: 2× is below what steady runs show (expected: clean, read "missed")
+    "inertia_error": ("inertia_error", "inertia", "factor", None, (6.0, 2.0)),
 }
 #: the quick setting: the newest causes (constant meter zeros) and per-run zeros, one seed each
 QUICK_SHIPPED = ("causes_offsets_and_gain", "causes_clean_9_seed214")

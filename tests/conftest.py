@@ -54,3 +54,18 @@ def simulated(pistons: int = 9, displacement_cm3: float = 80.0, seed: int = 1,
     chosen = [load_protocol(files[name]) for name in protocols]
     camp = simulate_campaign(chosen, spec, truth, seed=seed)
     return camp.frame, spec, params
+
+
+def concealed(name: str):
+    """A shipped concealed campaign of synthetic_data/concealed/: (spec, dataset, base fit, truth document)."""
+    import tomllib
+
+    from motorid.identify.least_squares import fit_least_squares
+    from motorid.identify.pipeline import load_campaign
+    from motorid.io.spec import load_motor_spec
+
+    root = REPO / "synthetic_data" / "concealed"
+    spec = load_motor_spec(root / name / "motor.toml")
+    _, ds = load_campaign([root / name / "campaign.csv.gz"], spec)
+    truth = tomllib.loads((root / "truths" / f"{name}.toml").read_text())
+    return spec, ds, fit_least_squares(ds, spec), truth

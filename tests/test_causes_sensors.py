@@ -9,29 +9,23 @@ speed group where it shows, against each run's own noise (discrepancy/locate.py
 """
 
 import math
-import tomllib
 
 import numpy as np
 import pytest
 
-from conftest import REPO
+from conftest import concealed
 from motorid import model
 from motorid.discrepancy.locate import locate
 from motorid.identify.least_squares import fit_least_squares
-from motorid.identify.pipeline import load_campaign
-from motorid.io.spec import load_motor_spec
 from motorid.physics import registry as catalog
 
-ROOT = REPO / "synthetic_data" / "concealed"
 NAME = "causes_sensor_lag_q_a"
 
 
 @pytest.fixture(scope="module")
 def lagged():
-    spec = load_motor_spec(ROOT / NAME / "motor.toml")
-    _, ds = load_campaign([ROOT / NAME / "campaign.csv.gz"], spec)
-    truth = tomllib.loads((ROOT / "truths" / f"{NAME}.toml").read_text())
-    return spec, ds, fit_least_squares(ds, spec), truth["mechanisms"]["sensor_lag_q_a"]["tau"]
+    spec, ds, base, truth = concealed(NAME)
+    return spec, ds, base, truth["mechanisms"]["sensor_lag_q_a"]["tau"]
 
 
 def _order_amplitude(values, theta, k):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -17,9 +18,9 @@ DEMO = REPO / "synthetic_data" / "demo"
 MBARI = REPO / "real_data" / "mbari_f11"
 
 
-def _motorid(*args, cwd=None):
+def _motorid(*args, cwd=None, env=None):
     return subprocess.run([sys.executable, "-m", "motorid", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd)
+                          cwd=cwd, env=env)
 
 
 @pytest.fixture(scope="module")
@@ -42,8 +43,12 @@ def test_a_log_without_shaft_angle_recovers_every_angle_free_parameter_within_it
     import tomllib
 
     out = tmp_path / "fit"
-    proc = _motorid("fit", angle_free_demo, "--motor", DEMO / "motor.toml", "--out", out)
+    scratch = tmp_path / "scratch"  # the command's temporary folder: the points' copy is gone when it ends
+    scratch.mkdir()
+    proc = _motorid("fit", angle_free_demo, "--motor", DEMO / "motor.toml", "--out", out,
+                    env={**os.environ, "TMPDIR": str(scratch)})
     assert proc.returncode == 0, proc.stderr
+    assert not list(scratch.glob("motorid-points-*"))
     doc = json.loads((out / "result.json").read_text())
     truth = tomllib.loads((DEMO / "truth.toml").read_text())["parameters"]
     par = doc["parameters"]

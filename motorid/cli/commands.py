@@ -95,6 +95,9 @@ def console() -> None:
     """
     sys.stdout = _PipeSafe(sys.stdout)
     rc = main()
+    points = sys.modules.get("motorid.identify.log_points")
+    if points is not None:  # the temporary points of logs without a shaft angle (exit handlers skipped)
+        points.remove_temporary_folders()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(rc)

@@ -2,7 +2,9 @@
 
 J·dω/dt is part of the running torque (MODEL.md); a derivative of sampled speed
 turns an aliased shaft-order ripple into a false slow acceleration, so the
-ripple is fitted against the shaft angle and its own derivative added back.
+ripple is fitted against the shaft angle and its own derivative added back; what
+the run's slow trend and that ripple leave is left out where it is mostly the
+speed sensor's noise amplified by the derivative (:func:`_without_noise`).
 """
 
 from __future__ import annotations
@@ -113,8 +115,12 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
     if not orders or sel.size < 50:
         return plain
     span = np.ptp(t[sel])
-    if abs(float(np.mean(w[sel]))) * span / (2 * np.pi) < 2.0:
+    if not span > 0:
         return plain
+    if abs(float(np.mean(w[sel]))) * span / (2 * np.pi) < 2.0:  # no ripple to resolve: a quadratic trend
+        u = 2.0 * (t[sel] - t[sel].min()) / span - 1.0
+        coef = np.linalg.lstsq(np.polynomial.chebyshev.chebvander(u, 2), w[sel], rcond=None)[0]
+        return _without_noise(plain, t, w, sel, coef, span, window)
     revolutions = abs(np.ptp(np.unwrap(th[sel]))) / (2 * np.pi)  # as sampled: order 1's aliased cycles
     u = 2.0 * (t[sel] - t[sel].min()) / max(span, 1e-300) - 1.0
     trend = np.polynomial.chebyshev.chebvander(u, int(np.clip(revolutions / 2, 2, 10)))
@@ -160,12 +166,61 @@ def running_acceleration(time, speed, theta, steady, window: int = 9, orders=(1,
             continue
         if ((rss_kept - rss) / 2.0) / (rss / dof) >= RIPPLE_F:
             kept, coef, rss_kept = kept + [k], c, rss
+    trend_coef = coef[:m] + np.r_[np.mean(w[sel]), np.zeros(m - 1)]  # the centring's constant back in
     if not kept:
-        return plain
+        return _without_noise(plain, t, w, sel, trend_coef, span, window)
     a, b = coef[trend.shape[1]::2], coef[trend.shape[1] + 1::2]
     k = np.asarray(kept, dtype=float)
     ok = np.isfinite(th)
     phase = np.outer(np.where(ok, th, 0.0), k)
     ripple = np.where(ok, np.cos(phase) @ a + np.sin(phase) @ b, np.nan)
     ripple_rate = np.where(ok, np.cos(phase) @ (k * b) - np.sin(phase) @ (k * a), 0.0)
-    return smoothed_acceleration(t, w - ripple, window) + w * ripple_rate
+    rest = w - ripple
+    return _without_noise(smoothed_acceleration(t, rest, window), t, rest, sel, trend_coef, span,
+                          window) + w * ripple_rate
+
+
+#: share of the unexplained part's variance that the speed noise must reach for the part to be left
+#: out of the acceleration (:func:`_without_noise`)
+NOISE_SHARE = 0.5
+
+
+def _without_noise(accel, t, speed, sel, trend_coef, span: float, window: int) -> np.ndarray:
+    """``accel`` (the smoothed derivative of ``speed``, shaft-order ripple taken out) on the ``sel``
+    samples without its part that the run's slow trend (Chebyshev coefficients ``trend_coef`` over
+    the ``sel`` samples' time span ``span``) does not explain, where that part is mostly the speed
+    sensor's noise: at least :data:`NOISE_SHARE` of its variance [rad/s²].
+
+    The derivative of sampled speed carries the speed noise amplified by 1/Δt: at 1 kHz a speed noise
+    of 0.3 rpm reads as ±4 rad/s² of acceleration, more than a dynamometer's own wobble, and J·α
+    built on it is J times that noise, not the torque the rotor needs.  A fit of J (or of anything
+    ∝ α) on such α is biased toward zero by var(true)/var(read) (regression dilution).  The part is
+    left out whole or kept whole, never scaled: the fit regresses on shaft-angle cell means, where
+    the noise averages down and a real part would not, so a scaled part would bias J the other way.
+    The noise variance is the derivative filter's gain times the speed noise, read from second
+    differences of consecutive samples about the trend (white noise; a real wobble's second
+    differences are (ωΔt)² times smaller; a quantized speed, whose second differences are mostly 0,
+    keeps its part).  The trend's own derivative is exact (a polynomial over the run)."""
+    if sel.size < 50 or not span > 0:
+        return accel
+    t_s = t[sel]
+    u = 2.0 * (t_s - t_s.min()) / span - 1.0
+    cheb = np.polynomial.chebyshev
+    e = speed[sel] - cheb.chebval(u, trend_coef)
+    slow = cheb.chebval(u, cheb.chebder(trend_coef)) * (2.0 / span)
+    dt = float(np.median(np.diff(t)))  # the log's own sampling interval (sel may skip samples)
+    d2 = np.diff(e, 2)[sel[2:] - sel[:-2] == 2]  # over consecutive samples only
+    if d2.size < 20 or not dt > 0 or not np.all(np.isfinite(e)):
+        return accel
+    noise_var = float(np.median(np.abs(d2)) / 0.6745) ** 2 / 6.0  # robust; 6σ² for white noise
+    k = odd_window(min(max(window, 5), t.size))
+    x = np.arange(k) - k // 2
+    powers = x[:, None] ** np.arange(3)[None, :]
+    gain = float(np.sum(np.linalg.solve(powers.T @ powers, powers.T)[1] ** 2)) / dt**2
+    part = accel[sel] - slow
+    spread = float(np.mean(part**2))
+    if not (np.isfinite(spread) and spread > 0) or noise_var * gain < NOISE_SHARE * spread:
+        return accel
+    out = np.asarray(accel, dtype=float).copy()
+    out[sel] = slow
+    return out

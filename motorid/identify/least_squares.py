@@ -25,6 +25,7 @@ from motorid.identify.identifiability import coverage_reasons, tfc_carries_kf_wa
 from motorid.identify.noise import correlation_threshold, correlation_times
 from motorid.identify.noise import breakaway_noise, floor_noise, initial_noise, residual_noise, spikiness
 from motorid.identify.problem import Problem
+from motorid.identify.run_scatter import widen_by_run_scatter
 from motorid.identify.solver import backend_for, gauss_newton_start, solve
 from motorid.identify.types import RUNNING_CHANNELS, FitOptions, FitResult
 from motorid.robust import robust_std
@@ -292,7 +293,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
                                                                    inliers, chi2, dof)
     all_params = {**{k: float(v) for k, v in problem.held.items()}, **{k: float(v) for k, v in values.items()}}
     out_values, out_std, ident = _reported(names, free, fixed, values, std, reasons, start, mechanisms, warnings)
-    return FitResult(
+    result = FitResult(
         names=names, free=free, values=out_values, std=out_std, covariance=cov, correlation=corr,
         identifiable=ident, reasons=reasons, noise=noise.pooled(obs, sig, run_of), noise_by_run=dict(noise.runs),
         outliers={c: int(np.sum(np.isfinite(obs[c]) & ~inliers[c])) for c in obs},
@@ -301,3 +302,8 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         problem=problem, covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var,
         breakaway_noise_shape=noise.gamma, covariance_breakaway=cov_brk, noise_correlation=taus,
     )
+    if opt.uncertainty and any("." in k for k in free):
+        # a mechanism's parameter whose runs disagree (a law that holds on average, an input with errors of
+        # its own such as the acceleration behind an inertia error): its standard error widened
+        result.warnings.extend(widen_by_run_scatter(result, [k for k in free if "." in k], data))
+    return result

@@ -501,6 +501,32 @@ def mixed_angle_warning(dataset) -> str:
             f"give them their angle channel")
 
 
+#: the temporary points folders this process made (:func:`remove_temporary_folders`)
+_TEMPORARY: list = []
+
+
+def _temporary_folder() -> str:
+    """A new temporary folder for a campaign's points, removed when the process ends: at exit, or by
+    the ``motorid`` command itself (:func:`remove_temporary_folders`), whose prompt exit skips the
+    exit handlers."""
+    import atexit
+    import tempfile
+
+    if not _TEMPORARY:
+        atexit.register(remove_temporary_folders)
+    folder = tempfile.mkdtemp(prefix="motorid-points-")
+    _TEMPORARY.append(folder)
+    return folder
+
+
+def remove_temporary_folders() -> None:
+    """Remove the temporary points folders this process made (what a result keeps was copied into it)."""
+    import shutil
+
+    while _TEMPORARY:
+        shutil.rmtree(_TEMPORARY.pop(), ignore_errors=True)
+
+
 def points_from_logs(paths, spec, channels=None, folder=None, known: bool = False) -> LogPoints | None:
     """Where no log of ``paths`` holds a shaft angle: read them, reduce them to operating points,
     write ``folder/`` :data:`POINTS_FILE` (a new temporary folder where ``folder`` is None) →
@@ -517,12 +543,7 @@ def points_from_logs(paths, spec, channels=None, folder=None, known: bool = Fals
         raise InputError("these logs hold no shaft angle, and no steady run or quasi-steady stretch of them gives an "
                          "operating point: " + ("; ".join(notes[:3]) or "no running run"))
     if folder is None:  # until a result is saved (LogPoints.move_into); gone when the process ends
-        import atexit
-        import shutil
-        import tempfile
-
-        folder = tempfile.mkdtemp(prefix="motorid-points-")
-        atexit.register(shutil.rmtree, folder, True)
+        folder = _temporary_folder()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / POINTS_FILE

@@ -48,7 +48,7 @@ _ALL = (
     PumpModeFriction(),
     FilmHeating(),  # the viscous loss bending over at high speed (real maps, issue 20)
     ReliefValve(),  # flow past the motor above a cracking pressure (the MBARI recordings, issue 20)
-    *spec_errors.MECHANISMS,  # displacement_error, leak_phase
+    *spec_errors.MECHANISMS,  # displacement_error, leak_phase, inertia_error
     *sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, flow_meter_offset_a/b/case,
     #                       sensor_lag_<channel>
 )

@@ -1,6 +1,6 @@
 """Spec errors: the motor data the model is given are not the motor's.
 
-Two mechanisms of the physics registry (issue 15), each an extension of the
+Three mechanisms of the physics registry (issue 15), each an extension of the
 one model through its hooks (:mod:`motorid.physics.base`):
 
 - ``displacement_error``: the true displacement is D' = D·(1 + ε), D the spec's.
@@ -15,6 +15,13 @@ one model through its hooks (:mod:`motorid.physics.base`):
   φ_spec = π/n unless the spec sets it.  It moves the shaft-angle pattern of the
   port-B-to-case leakage, so it shows in the case drain and port B flow
   against shaft angle in the runs where port B holds the high pressure.
+- ``inertia_error``: the rotor inertia is J' = J + ΔJ, J the spec's.  The
+  inertia torque T_J = −J α (Eq. 17) carries no fitted parameter, so a wrong J
+  puts −ΔJ·α into the running torque and nowhere else.  In steady runs α is the
+  speed ripple locked to the shaft (and a slow drift): the error shows as a
+  torque ripple at the orders of the speed ripple, a quarter period from it,
+  growing with speed.  Where the runs hold no acceleration the logs cannot
+  give J, and the fit's evidence for ΔJ stays below any threshold.
 
 Why the displacement error is not a torque gain (:mod:`motorid.physics.sensors`):
 in the torque the two are the same up to a rescaling of K_v, K_F, T_Fc, K_FS
@@ -142,4 +149,49 @@ class LeakPhase(CatalogMechanism):
         return f"port B's leakage pattern is shifted by {math.degrees(d):+.3g}° of shaft angle from the spec's phase"
 
 
-MECHANISMS = (DisplacementError(), LeakPhase())
+class InertiaError(CatalogMechanism):
+    """The rotor's true inertia J' = J_spec + ΔJ [kg·m²].
+
+    ΔT = −ΔJ·α in the running torque (Bartos 1992 Eq. 17); the held torque at
+    breakaway (α = 0 at the instant the shaft moves) is untouched.
+    """
+
+    single_start = True  # linear in ΔJ: one start of the fit is enough
+    id = "inertia_error"
+    name = "rotor inertia differs from the spec"
+    physics = ("The rotating group's moment of inertia differs from the value in the motor spec (a data-sheet "
+               "value for another variant, a coupling or a torque-flange hub counted or not counted). "
+               "The torque that accelerates the rotor, J·α, is then wrong by ΔJ·α: in steady runs it shows where "
+               "the shaft speed ripples, as a torque ripple a quarter period from the speed ripple, growing "
+               "with speed.")
+    reference = ("R. D. Bartos, JPL TDA Progress Report 42-111, 1992 (Eq. 17, T_J = −J α); ISO 4392-1:2002, "
+                 "Hydraulic fluid power - Determination of characteristics of motors - Part 1: At constant low "
+                 "speed and constant pressure")
+    channels = ("torque",)
+    parameters = {
+        "inertia_error.dJ": ParameterInfo("kg·m²", "rotor inertia minus the spec's: true J = spec J + ΔJ",
+                                          False, 0.002),
+    }
+    signature = ("running torque against the shaft acceleration: a torque ripple at the orders of the speed "
+                 "ripple, in quadrature with the speed and in phase with −α, its size ∝ the acceleration (∝ ω² "
+                 "for a ripple locked to the shaft); nothing in the flows or at breakaway")
+
+    def running(self, params, spec, samples, ch):
+        return ch._replace(torque=ch.torque + torque.inertia_torque(self.param(params, "dJ"), samples.acceleration))
+
+    def unseen_in_table(self, table) -> str | None:
+        return ("a table's points are steady means: the acceleration that shows a rotor inertia averages to "
+                "nothing there")
+
+    def describe(self, values, spec=None) -> str:
+        dj = self.value(values, "dJ")
+        if spec is not None and getattr(spec, "inertia", 0.0):
+            j = float(spec.inertia)
+            return (f"the logs give a rotor inertia of {j + dj:.4g} kg·m², {100 * dj / j:+.3g} % from the "
+                    f"spec's {j:.4g} kg·m²")
+        if spec is not None:
+            return f"the logs give a rotor inertia of {dj:.4g} kg·m² (the spec gives none)"
+        return f"the rotor inertia is {dj:+.4g} kg·m² from the spec's"
+
+
+MECHANISMS = (DisplacementError(), LeakPhase(), InertiaError())

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +64,8 @@ EXTRA = {"friction_inverse_viscosity": _friction_inverse_viscosity, "case_leak_p
 # name: (pistons, seed, physics {mechanism: {parameter: value}}, transducers, extra {effect: size}
 #        [, protocol folder: default causes_protocols])
 #   transducers: {"gain": {channel: g}, "lag": {channel: τ [s]}, "offset": {channel: constant zero [SI]},
-#                 "offset_sd": {channel: σ of a zero drawn per run [SI]}}
+#                 "offset_sd": {channel: σ of a zero drawn per run [SI]},
+#                 "inertia": {"factor": true rotor inertia / the motor.toml's (the spec given to the tool)}}
 CASES = {
     "displacement_error": (9, 201, {"displacement_error": {"eps": -0.02}}, {}, {}),
     "displacement_error_8": (8, 202, {"displacement_error": {"eps": 0.015}}, {}, {}),
@@ -90,13 +92,24 @@ CASES = {
     "flow_meter_offset_a": (9, 217, {}, {"offset": {"q_a": 5e-7}}, {}),
     "flow_meter_offset_case": (8, 218, {}, {"offset": {"q_case": -1.5e-7}}, {}),
     "offsets_and_gain": (9, 219, {}, {"gain": {"q_a": 0.006}, "offset": {"q_b": -6e-7, "torque": 0.4}}, {}),
+    # the spec's rotor inertia leaves out what turns with the rotor up to the torque flange (a coupling,
+    # the flange's hub): the true J is 4× the motor.toml's; simulated with the true J, not with the hook
+    "inertia_error": (9, 220, {}, {"inertia": {"factor": 4.0}}, {}),
 }
+
+
+def _spec_inertia(pistons: int) -> float:
+    """The rotor inertia of the motor.toml a case of ``pistons`` is given [kg·m²]."""
+    text = MOTOR_9.read_text() if pistons == 9 else MOTOR_8
+    return float(tomllib.loads(text)["motor"]["inertia_kg_m2"])
 
 
 def truth_document(pistons: int, physics: dict, sensors: dict, extra: dict) -> str:
     """The truth file: [parameters], [mechanisms.<id>] for every named cause (physics and transducers,
     with the catalog's parameter names), [extra.<effect>] for the effects in no catalog."""
     mechs = dict(physics)
+    if "inertia" in sensors:  # a spec error made by simulating with the true J (see make)
+        mechs["inertia_error"] = {"dJ": _spec_inertia(pistons) * (sensors["inertia"]["factor"] - 1.0)}
     for ch, g in sensors.get("gain", {}).items():
         mechs[{"torque": "torque_meter_gain"}.get(ch, f"flow_meter_gain_{ch[2:]}")] = {"g": g}
     for ch, tau in sensors.get("lag", {}).items():
@@ -182,8 +195,6 @@ def simulate_case(spec, truth, protocols, seed: int, sensors: dict, extra: dict)
 
 def make(name: str, dest_root: Path = HERE, truths: Path = HERE / "truths") -> Path:
     """Simulate case ``name`` into ``dest_root/causes_<name>/`` and its truth into ``truths/``."""
-    import tomllib
-
     from motorid.bench.protocols import load_protocol
     from motorid.bench.truth import parse_truth
     from motorid.io.logs import write_log
@@ -203,6 +214,8 @@ def make(name: str, dest_root: Path = HERE, truths: Path = HERE / "truths") -> P
     truth = parse_truth({"parameters": table["parameters"], "mechanisms": {k: v for k, v in table.get(
         "mechanisms", {}).items() if k in physics}}, f"causes_{name}")
     protocols = [load_protocol(p) for p in sorted(folder.glob("*.toml"))]
+    if "inertia" in sensors:  # the rotor the bench turns, not the one the motor.toml describes
+        spec = dataclasses.replace(spec, inertia=spec.inertia * sensors["inertia"]["factor"])
     frame = simulate_case(spec, truth, protocols, seed, sensors, extra)
     write_log(frame, dest / "campaign.csv.gz")
     return dest

@@ -32,7 +32,7 @@ VALUES = {
     "case_pressure_friction.K_c": 0.05,
     "pressure_viscosity.alpha": 1.5e-8,
     # spec errors and transducers (issue 15)
-    "displacement_error.eps": 0.02, "leak_phase.dphi": 0.15,
+    "displacement_error.eps": 0.02, "leak_phase.dphi": 0.15, "inertia_error.dJ": 0.003,
     "flow_meter_gain_a.g": 0.01, "flow_meter_gain_b.g": -0.012, "flow_meter_gain_case.g": 0.03,
     "torque_meter_gain.g": -0.008,
     "flow_meter_offset_a.c": 5e-7, "flow_meter_offset_b.c": -4e-7, "flow_meter_offset_case.c": 1.5e-7,
@@ -186,8 +186,10 @@ def test_typical_sizes_are_noticeable_but_modest(mid):
     dp = np.array([50.0, 150.0, 250.0]) * BAR
     ww, pp = np.meshgrid(np.r_[w, -w], dp)
     n = ww.size
+    # the acceleration of a dynamometer's 0.2 % once-per-revolution speed ripple, 0.002·ω²
     s = model.make_samples(SPEC, np.linspace(0, 2 * np.pi, n), ww.ravel(), 7 * BAR + pp.ravel(),
-                           np.full(n, 7 * BAR), np.full(n, 0.7 * BAR), np.full(n, 0.04))
+                           np.full(n, 7 * BAR), np.full(n, 0.7 * BAR), np.full(n, 0.04),
+                           acceleration=0.002 * ww.ravel() ** 2 * np.cos(np.linspace(0, 2 * np.pi, n)))
     typical = {k: v.typical for k, v in mech.parameters.items()}
     d = _delta(mech, s, typical)
     base = _outputs(_params(mech, typical), s, ())
