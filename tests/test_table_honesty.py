@@ -149,6 +149,29 @@ def test_a_friction_with_a_hump_in_pressure_is_reported_even_without_a_formula(s
     assert "sense of rotation" in along["pressure difference"]["where"]
 
 
+def test_a_flow_between_the_ports_that_follows_the_sign_of_the_pressure_difference_is_found(spec, tmp_path):
+    """A cross-port leak ∝ ΔP|ΔP| in a four-quadrant map: it changes sign with ΔP, so its residual
+    cancels in a mean over both signs of ΔP at one |ΔP| (and over the directions too, since pump mode
+    puts the high pressure on the other port); taken in the sense of the pressure difference it is a
+    structure along |ΔP| in both port flows.  A clean map of the same grid shows none."""
+    from motorid.bench.maps import map_grid
+    from motorid.discrepancy.table_structure import table_structures
+    from motorid.identify.tables import fit_table
+
+    grid = map_grid([300, 1000, 2000, 3000], [20, 100, 200, 300], 4)
+    df = _map(spec, grid, np.random.default_rng(12))
+    assert table_structures(fit_table(_table(spec, df, tmp_path / "clean.csv"), spec)) == []
+    dp = (df.p_a_bar - df.p_b_bar).to_numpy()
+    extra = 0.1 * dp * np.abs(dp) / 300.0**2  # L/min: into the high-pressure port, out of the low one
+    leaky = fit_table(_table(spec, df.assign(q_a_lpm=df.q_a_lpm + extra, q_b_lpm=df.q_b_lpm - extra),
+                             tmp_path / "leak.csv"), spec)
+    found = table_structures(leaky)
+    for c in ("q_a", "q_b"):
+        mine = [s for s in found if s["channel"] == c]
+        assert mine, found
+        assert "sense of the pressure difference" in mine[0]["where"], mine[0]["where"]
+
+
 def test_a_one_quadrant_map_of_the_inlet_flow_cannot_tell_the_two_leakages_apart(spec, tmp_path):
     """Motor mode only, the low port at the case pressure: port A's leakage is (K_L0 + K_AB)·P_A/μ,
     so neither is identifiable alone, and both are said so (never carried as wild values)."""

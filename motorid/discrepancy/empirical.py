@@ -6,7 +6,8 @@ physics) is regressed on a channel's residuals after the final fit:
 
 - speed factors 1, sgn ω, ω, ω|ω|, sgn ω·√|ω|;
 - pressure factors 1, ΔP, |ΔP|, √|ΔP|, P_A+P_B, P_A−P_c, P_B−P_c,
-  (P_A−P_c)(P_B−P_c), ΔP², (P_A+P_B)²;
+  (P_A−P_c)(P_B−P_c), ΔP², sgn ΔP·√|ΔP|, ΔP|ΔP|, (P_A+P_B)² (the odd ones
+  for a flow between the ports, which follows the sign of ΔP);
 - viscosity factors 1, μ, 1/μ;
 - shaft-order harmonics cos kθ, sin kθ (k = 1…4, n, 2n), alone and × ΔP;
 
@@ -70,6 +71,9 @@ def _pressure_factors():
             Factor("(P_B−P_c)", 1, 0, lambda x: x.p_b - x.p_case),
             Factor("(P_A−P_c)(P_B−P_c)", 2, 0, lambda x: (x.p_a - x.p_case) * (x.p_b - x.p_case)),
             Factor("ΔP²", 2, 0, lambda x: (x.p_a - x.p_b) ** 2),
+            # odd in ΔP, as a flow between the ports is: through an orifice, through gaps that open
+            Factor("sgn ΔP·√|ΔP|", 0.5, 0, lambda x: np.sign(x.p_a - x.p_b) * np.sqrt(np.abs(x.p_a - x.p_b))),
+            Factor("ΔP|ΔP|", 2, 0, lambda x: (x.p_a - x.p_b) * np.abs(x.p_a - x.p_b)),
             Factor("(P_A+P_B)²", 2, 0, lambda x: (x.p_a + x.p_b) ** 2)]
 
 

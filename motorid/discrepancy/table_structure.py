@@ -4,7 +4,9 @@ The table counterpart of :func:`motorid.discrepancy.locate.locate`: after a fit 
 operating points every channel's residual over its σ should scatter as unit noise
 with no trend along any operating variable.  The points are grouped along |ω|,
 direction, |ΔP|, port-pressure sum P_A + P_B, viscosity, operating mode (motor /
-pump) and recording; each group's summed z-score over √n is a standard normal
+pump) and recording, the residual taken as signed, in the sense of rotation and in
+the sense of the pressure difference (a loss that follows ω or ΔP cancels in a
+mean over both signs); each group's summed z-score over √n is a standard normal
 under the model, and Σ z_g² over a variable's groups is tested as χ² (dof = the
 number of groups; the fitted parameters only shrink it, so the test errs on the
 side of silence).  A structure counts where p is below ``alpha`` over the number
@@ -64,10 +66,15 @@ def table_structures(fit, alpha: float = 1e-3, min_effect: float = 0.3) -> list:
             continue
         z = np.where(ok, r / np.where(ok, sig, 1.0), 0.0)
         # a loss (friction, leakage) keeps its sense to the rotation: in a map of both directions its
-        # residual changes sign with ω, and a mean over the directions would cancel it
+        # residual changes sign with ω, and a mean over the directions would cancel it; a flow between
+        # the ports keeps its sense to the pressure difference: in a map where either port holds the
+        # high pressure its residual changes sign with ΔP, and a mean over |ΔP| would cancel it
         senses = [("", 1.0)]
         if "direction" in variables:
             senses.append((" (taken in the sense of rotation)", np.sign(np.asarray(table.speed, float))))
+        dp_sign = np.sign(np.asarray(table.p_a, float) - np.asarray(table.p_b, float))
+        if (dp_sign[ok] > 0).sum() >= 5 and (dp_sign[ok] < 0).sum() >= 5:
+            senses.append((" (taken in the sense of the pressure difference)", dp_sign))
         for sense, sgn in senses:
             zs, rs = z * sgn, r * sgn
             for var, labels in variables.items():
