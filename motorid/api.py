@@ -348,7 +348,7 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
     doc = diagnosis_document(dg, spec)
     doc["inputs"] = {"logs": [str(p) for p in logs], "motor": _motor_input(motor, motor_path)}
     result = DiagnosisResult(doc, residual_arrays(dg, dataset), dg)
-    # the final model's fit, as `motorid fit --mechanism ...` writes it: diagnose's own final fit (every
+    # the final model's fit, as `api.fit(..., mechanisms=[...])` gives it: diagnose's own final fit (every
     # sample, noise re-estimated), not a second reading and fit of the same logs
     from motorid.identify.pipeline import Identification, add_fit_warnings
 

@@ -211,6 +211,26 @@ def test_simscape_tables_within_their_stated_interpolation_error(motor, result_d
     assert (vl[dp > 0] > 0).all() and (vl[dp < 0] < 0).all()
 
 
+def test_a_measured_rotor_inertia_is_the_one_exported(result_dir, tmp_path):
+    """Diagnose's inertia_error is ΔJ·α in the torque; the exports leave J·α to the load model, so the
+    measured J = spec J + ΔJ is what they write (the servo loop's load needs it), not a torque term."""
+    d = tmp_path / "fit"
+    shutil.copytree(result_dir, d)
+    diag = json.loads((d / "diagnosis.json").read_text())
+    diag["mechanisms"].append({"id": "inertia_error", "name": "inertia_error",
+                               "parameters": {"inertia_error.dJ": {"value": 0.011, "std": 0.001, "unit": "kg·m²"}}})
+    (d / "diagnosis.json").write_text(json.dumps(diag))
+    spec_j = load_identified(result_dir).spec.inertia
+    motor = load_identified(d)
+    assert motor.spec.inertia == pytest.approx(spec_j + 0.011, rel=1e-12)
+    assert "inertia_error" not in {m.id for m in motor.mechanisms}
+    assert "inertia_error.dJ" not in motor.params
+    assert any("measured rotor inertia" in n for n in motor.notes)
+    out = tmp_path / "m.py"
+    export(d, "python", out)
+    assert f"INERTIA = {spec_j + 0.011!r}" in out.read_text()
+
+
 def test_bad_result_dir_is_one_line_and_exit_2(tmp_path, capsys):
     from motorid.cli import main
 

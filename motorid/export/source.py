@@ -149,6 +149,13 @@ def load_identified(result_dir, motor=None, diagnosis: bool = True) -> Identifie
         missing = [k for k in mech.parameters if k not in params]
         if missing:
             raise InputError(f"{result_path}: mechanism '{mid}' lacks parameter(s) {', '.join(missing)}")
+        fold = getattr(mech, "fold_into_spec", None)
+        if fold is not None:  # a spec value the fit measured (the rotor inertia): into the spec exported
+            before = spec.inertia
+            spec = fold(params, spec)
+            notes.append(f"{mid} ({mech.name}): the measured rotor inertia J = {spec.inertia:.6g} kg.m2 "
+                         f"(spec: {before:.6g}) is the one written for the load model")
+            continue
         mechanisms.append(mech)
     base = [k for k in params if "." not in k]
     for need in ("Kv", "KF", "KFS", "TFc", "Ks", "KL0", "KAB"):

@@ -183,6 +183,13 @@ class InertiaError(CatalogMechanism):
         return ("a table's points are steady means: the acceleration that shows a rotor inertia averages to "
                 "nothing there")
 
+    def fold_into_spec(self, params: dict, spec):
+        """The spec with the measured inertia J + ΔJ: what an export writes for the load model (the
+        exported torque leaves J·α to the load, so ΔJ belongs with J, not in the torque)."""
+        import dataclasses
+
+        return dataclasses.replace(spec, inertia=float(spec.inertia) + float(params[f"{self.id}.dJ"]))
+
     def describe(self, values, spec=None) -> str:
         dj = self.value(values, "dJ")
         if spec is not None and getattr(spec, "inertia", 0.0):
