@@ -81,6 +81,16 @@ def test_sensor_lag_matches_a_time_domain_first_order_filter(channel, tau):
     assert abs(np.mean(hook[last] - true[last])) < 1e-3 * ripple
 
 
+def test_library_columns_that_the_data_cannot_tell_apart_are_kept_once():
+    """Where ΔP has one sign, sgn ΔP·√|ΔP| is √|ΔP| and ΔP|ΔP| is ΔP²: the first of each such set is kept,
+    so a formula never claims an odd law the data cannot tell from the even one."""
+    from motorid.discrepancy.empirical import _distinct_columns
+
+    a, b = np.linspace(1.0, 2.0, 50), np.linspace(0.0, 1.0, 50) ** 2
+    X = np.column_stack([a, -a, b, 2.0 * a, np.zeros(50), a + 1e-3 * b])
+    assert _distinct_columns(X) == [0, 2, 5]
+
+
 def test_empirical_term_recovers_a_known_law_and_stays_silent_on_noise():
     rng = np.random.default_rng(5)
     runs = 24

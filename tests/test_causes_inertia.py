@@ -47,6 +47,12 @@ def test_inertia_error_is_the_model_with_the_true_inertia():
     without = model.predict(model.as_jax(BASE), spec, s)
     assert np.max(np.abs(np.asarray(hooked.torque) - np.asarray(without.torque))) > 0.1  # J·α is not nothing
     assert mech.unseen_in_table(None)  # a table of steady means holds no acceleration
+    # what an export writes for the load: the measured J, never a negative one
+    assert mech.fold_into_spec({"inertia_error.dJ": 0.011}, spec).inertia == pytest.approx(0.015, rel=1e-12)
+    from motorid.errors import InputError
+
+    with pytest.raises(InputError, match="not positive"):
+        mech.fold_into_spec({"inertia_error.dJ": -0.005}, spec)
     words = mech.describe({"dJ": 0.011}, spec=spec)
     assert "0.015 kg·m²" in words and "+275 %" in words
 

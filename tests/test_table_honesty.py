@@ -170,6 +170,22 @@ def test_a_flow_between_the_ports_that_follows_the_sign_of_the_pressure_differen
         mine = [s for s in found if s["channel"] == c]
         assert mine, found
         assert "sense of the pressure difference" in mine[0]["where"], mine[0]["where"]
+    # no test twice under two names (by operating mode the sense of ΔP is the sense of rotation)
+    keys = [(s["channel"], s["variable"], round(s["statistic"], 6)) for s in found]
+    assert len(keys) == len(set(keys)), keys
+    # a motor-only map of both directions: sgn ΔP = sgn ω at every point, so no sense of ΔP is added
+    four = map_grid([300, 1000, 2000, 3000], [20, 100, 200, 300], 4)
+    motor_mode = four[np.sign(four[:, 1] - four[:, 2]) == np.sign(four[:, 0])]
+    motor = _map(spec, motor_mode, np.random.default_rng(13))
+    dp = (motor.p_a_bar - motor.p_b_bar).to_numpy()
+    assert np.all(np.sign(dp) == np.sign(motor.speed_rpm)) and len(set(np.sign(dp))) == 2
+    extra = 0.4 * dp * np.abs(dp) / 300.0**2
+    one = table_structures(fit_table(_table(spec, motor.assign(q_a_lpm=motor.q_a_lpm + extra,
+                                                               q_b_lpm=motor.q_b_lpm - extra),
+                                            tmp_path / "motor.csv"), spec))
+    assert one and not any("pressure difference)" in s["where"] for s in one), [s["where"] for s in one]
+    keys = [(s["channel"], s["variable"], round(s["statistic"], 6)) for s in one]
+    assert len(keys) == len(set(keys)), keys
 
 
 def test_a_one_quadrant_map_of_the_inlet_flow_cannot_tell_the_two_leakages_apart(spec, tmp_path):

@@ -258,10 +258,13 @@ def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regi
     X = np.column_stack([N, L]) * w[:, None]
     ok = np.all(np.isfinite(X), axis=1) & np.isfinite(y)
     X, y, run_of = X[ok], y[ok], np.asarray(run_of)[ok]
+    k = N.shape[1]
+    distinct = _distinct_columns(X[:, k:])  # on data of one sign of ΔP, sgn ΔP·√|ΔP| is ±√|ΔP|: one of the two
+    terms, L = [terms[i] for i in distinct], L[:, distinct]
+    X = X[:, list(range(k)) + [k + i for i in distinct]]
     scale = np.sqrt(np.mean(X**2, axis=0))
     scale[scale == 0] = 1.0
     Z = X / scale
-    k = N.shape[1]
     if np.unique(run_of).size < 2 * folds:
         return None
     fold = fold_labels(run_of, folds)
@@ -284,6 +287,23 @@ def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regi
     gain = 1.0 - best / base if base > 0 else 0.0
     region_gain = region_gains(Z, y, k, list(chosen_idx), {n: np.asarray(m)[ok] for n, m in (regions or {}).items()})
     return EmpiricalTerm(channel, chosen, float(gain), region_gain, size)
+
+
+def _distinct_columns(X) -> list:
+    """Indices of the columns of ``X`` that are not ± an earlier one (the first of each such set kept):
+    on the data at hand two library terms can be one column (sgn ΔP·√|ΔP| and √|ΔP| where ΔP has one
+    sign), and the formula must not claim the one the data cannot tell from the other."""
+    norms = np.sqrt(np.einsum("ij,ij->j", X, X))
+    keep = []
+    for j in range(X.shape[1]):
+        if norms[j] == 0:
+            continue
+        if keep:
+            cos = np.abs(X[:, keep].T @ X[:, j]) / (norms[keep] * norms[j])
+            if np.any(cos > 1.0 - 1e-12):
+                continue
+        keep.append(j)
+    return keep
 
 
 def fold_labels(run_of, folds: int) -> np.ndarray:

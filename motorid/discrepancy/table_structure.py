@@ -69,22 +69,28 @@ def table_structures(fit, alpha: float = 1e-3, min_effect: float = 0.3) -> list:
         # residual changes sign with ω, and a mean over the directions would cancel it; a flow between
         # the ports keeps its sense to the pressure difference: in a map where either port holds the
         # high pressure its residual changes sign with ΔP, and a mean over |ΔP| would cancel it
-        senses = [("", 1.0)]
+        w_sign = np.sign(np.asarray(table.speed, float))
+        senses = [("", np.ones_like(z))]
         if "direction" in variables:
-            senses.append((" (taken in the sense of rotation)", np.sign(np.asarray(table.speed, float))))
+            senses.append((" (taken in the sense of rotation)", w_sign))
         dp_sign = np.sign(np.asarray(table.p_a, float) - np.asarray(table.p_b, float))
-        if (dp_sign[ok] > 0).sum() >= 5 and (dp_sign[ok] < 0).sum() >= 5:
+        # where sgn ΔP is ± sgn ω at every point (motor mode only, pump mode only) it is the same test again
+        if ((dp_sign[ok] > 0).sum() >= 5 and (dp_sign[ok] < 0).sum() >= 5
+                and not np.all(dp_sign[ok] == w_sign[ok]) and not np.all(dp_sign[ok] == -w_sign[ok])):
             senses.append((" (taken in the sense of the pressure difference)", dp_sign))
         for sense, sgn in senses:
+            use = ok & (sgn != 0)  # a point at ω = 0 or ΔP = 0 has no sense to take
             zs, rs = z * sgn, r * sgn
             for var, labels in variables.items():
-                if sense and var == "direction":
+                # by direction the sense of rotation is the signed test again; by operating mode (within
+                # which sgn ΔP = ± sgn ω) the sense of ΔP is the sense of rotation again
+                if (sense and var == "direction") or ("pressure" in sense and var == "operating mode"):
                     continue
-                stat, dof, tested = _group_test(labels, np.where(ok, zs, np.nan), var)
+                stat, dof, tested = _group_test(labels, np.where(use, zs, np.nan), var)
                 if dof < 2:
                     continue
-                groups = [(lab, float(np.mean(rs[sel & ok])), float(zg), float(np.median(sig[sel & ok])),
-                           int((sel & ok).sum())) for lab, zg, sel in tested]
+                groups = [(lab, float(np.mean(rs[sel & use])), float(zg), float(np.median(sig[sel & use])),
+                           int((sel & use).sum())) for lab, zg, sel in tested]
                 worst = max(groups, key=lambda g: abs(g[2]))
                 verb = "falls short of the model" if worst[1] < 0 else "exceeds the model"
                 at = {"direction": "in", "operating mode": "in", "recording": "in recording"}.get(var, f"at {var}")
@@ -102,7 +108,7 @@ def table_structures(fit, alpha: float = 1e-3, min_effect: float = 0.3) -> list:
 
 def shape_words(structures: list) -> str:
     """How the residual runs along each variable of ``structures`` (one channel's), in words: per
-    variable its strongest structure (as signed, or in the sense of rotation)."""
+    variable its strongest structure (as signed, in the sense of rotation or of the pressure difference)."""
     words = []
     strongest: dict = {}
     for s in sorted(structures, key=lambda s: s["p_value"]):

@@ -188,7 +188,14 @@ class InertiaError(CatalogMechanism):
         exported torque leaves J·α to the load, so ΔJ belongs with J, not in the torque)."""
         import dataclasses
 
-        return dataclasses.replace(spec, inertia=float(spec.inertia) + float(params[f"{self.id}.dJ"]))
+        from motorid.errors import InputError
+
+        j = float(spec.inertia) + float(params[f"{self.id}.dJ"])
+        if not j > 0:
+            raise InputError(f"inertia_error: the measured rotor inertia J = {j:.4g} kg·m² (spec "
+                             f"{float(spec.inertia):.4g} + ΔJ) is not positive; export with --no-diagnosis, or "
+                             f"check the spec's inertia_kg_m2")
+        return dataclasses.replace(spec, inertia=j)
 
     def describe(self, values, spec=None) -> str:
         dj = self.value(values, "dJ")
