@@ -293,15 +293,14 @@ def _distinct_columns(X) -> list:
     """Indices of the columns of ``X`` that are not ± an earlier one (the first of each such set kept):
     on the data at hand two library terms can be one column (sgn ΔP·√|ΔP| and √|ΔP| where ΔP has one
     sign), and the formula must not claim the one the data cannot tell from the other."""
-    norms = np.sqrt(np.einsum("ij,ij->j", X, X))
+    gram = X.T @ X  # one pass over the rows (they are the samples: up to a few hundred thousand)
+    norms = np.sqrt(np.maximum(np.diag(gram), 0.0))
     keep = []
     for j in range(X.shape[1]):
         if norms[j] == 0:
             continue
-        if keep:
-            cos = np.abs(X[:, keep].T @ X[:, j]) / (norms[keep] * norms[j])
-            if np.any(cos > 1.0 - 1e-12):
-                continue
+        if keep and np.any(np.abs(gram[keep, j]) > (1.0 - 1e-12) * norms[keep] * norms[j]):
+            continue
         keep.append(j)
     return keep
 

@@ -117,11 +117,7 @@ class Screen:
                 cnt = np.bincount(self.template.cell_of, weights=np.asarray(base.inliers[c], dtype=float),
                                   minlength=self.template.n_cells)
                 self.counts[c] = np.concatenate([cnt, np.zeros(w[c].size - cnt.size)])
-        run_of_event = np.asarray(getattr(dataset, "run_of_event", np.zeros(0, int)), dtype=int)
-        self._run = {c: (np.concatenate([run_of_event, np.full(w[c].size - run_of_event.size, -1)])
-                         if c == "breakaway" else
-                         np.concatenate([self.template.cell_run, np.full(w[c].size - self.template.n_cells, -1)]))
-                     for c in obs}
+        self._run = self.template.entry_runs(dataset)
         self._coverage: dict = {}  # parameter names → what the data cannot see (coverage_reasons)
 
     @property

@@ -149,10 +149,9 @@ def load_identified(result_dir, motor=None, diagnosis: bool = True) -> Identifie
         missing = [k for k in mech.parameters if k not in params]
         if missing:
             raise InputError(f"{result_path}: mechanism '{mid}' lacks parameter(s) {', '.join(missing)}")
-        fold = getattr(mech, "fold_into_spec", None)
-        if fold is not None:  # a spec value the fit measured (the rotor inertia): into the spec exported
-            before = spec.inertia
-            spec = fold(params, spec)
+        folded = mech.fold_into_spec(params, spec)
+        if folded is not None:  # a spec value the fit measured (the rotor inertia): into the spec exported
+            before, spec = spec.inertia, folded
             notes.append(f"{mid} ({mech.name}): the measured rotor inertia J = {spec.inertia:.6g} kg.m2 "
                          f"(spec: {before:.6g}) is the one written for the load model")
             continue

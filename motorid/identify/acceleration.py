@@ -16,6 +16,14 @@ import numpy as np
 from motorid.robust import odd_window
 
 
+def _derivative_weights(k: int) -> np.ndarray:
+    """The Savitzky-Golay first-derivative weights of a quadratic through ``k`` evenly spaced samples
+    (per sample interval)."""
+    x = np.arange(k) - k // 2
+    powers = x[:, None] ** np.arange(3)[None, :]
+    return np.linalg.solve(powers.T @ powers, powers.T)[1]
+
+
 def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
     """dω/dt of one run by a local quadratic fit of speed against time [rad/s²].
 
@@ -40,9 +48,7 @@ def smoothed_acceleration(time, speed, window: int = 9) -> np.ndarray:
     if np.all(np.abs(dt - scale) <= 1e-3 * scale) and n > k:
         # even sampling (time stamps rounded to a few digits count as even: a 0.1 % jitter
         # moves the slope by 0.1 % at most): one set of derivative weights for every interior sample
-        x = np.arange(k) - k // 2
-        powers = x[:, None] ** np.arange(3)[None, :]
-        weights = np.linalg.solve(powers.T @ powers, powers.T)[1]
+        weights = _derivative_weights(k)
         out = np.empty(n)
         out[k // 2:n - k // 2] = np.correlate(w, weights, mode="valid")
         edge = np.r_[np.arange(k // 2), np.arange(n - k // 2, n)]
@@ -187,7 +193,7 @@ NOISE_SHARE = 0.5
 
 def _without_noise(accel, t, speed, sel, trend_coef, span: float, window: int) -> np.ndarray:
     """``accel`` (the smoothed derivative of ``speed``, shaft-order ripple taken out) on the ``sel``
-    samples without its part that the run's slow trend (Chebyshev coefficients ``trend_coef`` over
+    samples (50 or more, over a time ``span`` > 0) without its part that the run's slow trend (Chebyshev coefficients ``trend_coef`` over
     the ``sel`` samples' time span ``span``) does not explain, where that part is mostly the speed
     sensor's noise: at least :data:`NOISE_SHARE` of its variance [rad/s²].
 
@@ -201,8 +207,6 @@ def _without_noise(accel, t, speed, sel, trend_coef, span: float, window: int) -
     differences of consecutive samples about the trend (white noise; a real wobble's second
     differences are (ωΔt)² times smaller; a quantized speed, whose second differences are mostly 0,
     keeps its part).  The trend's own derivative is exact (a polynomial over the run)."""
-    if sel.size < 50 or not span > 0:
-        return accel
     t_s = t[sel]
     u = 2.0 * (t_s - t_s.min()) / span - 1.0
     cheb = np.polynomial.chebyshev
@@ -213,10 +217,7 @@ def _without_noise(accel, t, speed, sel, trend_coef, span: float, window: int) -
     if d2.size < 20 or not dt > 0 or not np.all(np.isfinite(e)):
         return accel
     noise_var = float(np.median(np.abs(d2)) / 0.6745) ** 2 / 6.0  # robust; 6σ² for white noise
-    k = odd_window(min(max(window, 5), t.size))
-    x = np.arange(k) - k // 2
-    powers = x[:, None] ** np.arange(3)[None, :]
-    gain = float(np.sum(np.linalg.solve(powers.T @ powers, powers.T)[1] ** 2)) / dt**2
+    gain = float(np.sum(_derivative_weights(odd_window(min(max(window, 5), t.size))) ** 2)) / dt**2
     part = accel[sel] - slow
     spread = float(np.mean(part**2))
     if not (np.isfinite(spread) and spread > 0) or noise_var * gain < NOISE_SHARE * spread:

@@ -302,6 +302,17 @@ class Problem:
         self.cells = (obs, w)
         self.cells_version += 1
 
+    def entry_runs(self, data) -> dict:
+        """Per channel of :attr:`cells`: the run of each cell (each breakaway event for
+        ``"breakaway"``, from ``data.run_of_event``), −1 for the padding."""
+        w = self.cells[1]
+        out = {}
+        for c in w:
+            runs = (np.asarray(getattr(data, "run_of_event", np.zeros(0, int)), dtype=int) if c == "breakaway"
+                    else np.asarray(self.cell_run, dtype=int))
+            out[c] = np.concatenate([runs, np.full(max(w[c].size - runs.size, 0), -1)])
+        return out
+
     def ctx(self, scales=None) -> Ctx:
         free = tuple(self.free)
         if scales is None:

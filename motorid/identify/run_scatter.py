@@ -26,24 +26,6 @@ MIN_RUNS = 4
 ALPHA = 0.01
 
 
-def _entry_runs(problem, data) -> np.ndarray | None:
-    """The run of each entry of the problem's weighted residual (cells of each running channel, then the
-    breakaway events, as :func:`motorid.identify.problem.weighted_residual` concatenates them; −1 for
-    padding)."""
-    obs, w = problem.cells
-    parts = []
-    for c in (c for c in CHANNELS if c in obs):
-        size = int(np.asarray(w[c]).size)
-        if c == "breakaway":
-            runs = np.asarray(getattr(data, "run_of_event", np.zeros(0, int)), dtype=int)
-        else:
-            runs = np.asarray(problem.cell_run, dtype=int)
-        if runs.size > size:
-            return None
-        parts.append(np.concatenate([runs, np.full(size - runs.size, -1)]))
-    return np.concatenate(parts) if parts else None
-
-
 def birge_ratio(fit, name: str, data) -> tuple[float, int] | None:
     """(R², N runs) of fitted parameter ``name`` of ``fit`` (on ``data``, its Dataset), or None where
     fewer than :data:`MIN_RUNS` runs carry information on it (a run's own standard error within
@@ -55,11 +37,12 @@ def birge_ratio(fit, name: str, data) -> tuple[float, int] | None:
     if (problem is None or name not in fit.free or name not in problem.free or std is None or value is None
             or getattr(problem, "cells", None) is None or not np.isfinite(std) or std <= 0):
         return None
-    runs = _entry_runs(problem, data)
+    by_channel = problem.entry_runs(data)
+    runs = np.concatenate([by_channel[c] for c in CHANNELS if c in by_channel])  # as the residual is concatenated
     values = {k: fit.params_all[k] for k in problem.free}
     rho = np.asarray(residual_jit(as_arrays(values), problem.ctx()), dtype=float)
     moved = np.asarray(residual_jit(as_arrays({**values, name: value + std}), problem.ctx()), dtype=float)
-    if runs is None or runs.size != rho.size:
+    if runs.size != rho.size:
         return None
     slope = (moved - rho) / std  # ∂ρ/∂p
     use = (runs >= 0) & np.isfinite(rho) & np.isfinite(slope)

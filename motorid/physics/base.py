@@ -143,6 +143,12 @@ class Mechanism:
         name a mechanism so fitted."""
         return None
 
+    def fold_into_spec(self, params: dict, spec):
+        """The spec with a value this mechanism measured folded in, for an export that writes the spec
+        instead of the mechanism's term (a rotor inertia: the exported torque leaves J·α to the load);
+        None where the mechanism is a term of the exported model, as most are."""
+        return None
+
     def static_limit(self, params: dict, spec, events: Samples, limit):
         """Change the static friction limit T_break at breakaway events [N·m]."""
         return limit
