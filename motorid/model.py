@@ -119,6 +119,27 @@ class MotorSpec:
         return asdict(self)
 
 
+# The spec's numbers enter a compiled program as its inputs, not as constants baked into it: one
+# program then serves every motor with the same number of pistons and harmonics (a fleet, a test
+# suite, another lab's motors), where each motor compiled its own before.  The names are not part
+# of a program (a traced copy has none; no traced code reads them).
+def _f64(x):
+    return np.asarray(x, dtype=np.float64) if isinstance(x, (int, float)) else x  # None, an array or a tracer
+
+
+jax.tree_util.register_pytree_node(
+    OilSpec,
+    lambda o: ((_f64(o.nu40_cSt), _f64(o.nu100_cSt), _f64(o.density15_kg_m3), _f64(o.expansion_per_K),
+                _f64(o.temp_C)), None),
+    lambda _, c: OilSpec("", *c),
+)
+jax.tree_util.register_pytree_node(
+    MotorSpec,
+    lambda s: ((_f64(s.displacement), _f64(s.inertia), _f64(s.leak_phase), s.oil), (s.pistons, s.leak_harmonics)),
+    lambda aux, c: MotorSpec("", aux[0], c[0], c[1], c[2], aux[1], c[3]),
+)
+
+
 # ---------------------------------------------------------------------------
 # unknowns: the parameters
 

@@ -243,3 +243,34 @@ def test_a_pruned_program_is_compiled_again_and_a_loaded_one_marked_used(tmp_pat
     assert path.stat().st_mtime > 1e9
     path.unlink()  # pruned
     assert _run(script, cache) == ["1", "12.0"]
+
+
+def test_motors_that_differ_only_in_their_numbers_share_one_compiled_program():
+    """The spec's numbers (D, J, φ, the oil's) are inputs of a compiled program, not constants in
+    it: a second motor with the same pistons and harmonics runs the first one's program, and each
+    gets its own answer (the model evaluated with its own D and J)."""
+    import dataclasses
+
+    import jax
+
+    from motorid import model
+    from motorid._aot import cached_jit
+
+    g = cached_jit(model.predict)
+    a = model.MotorSpec("motor A", 9, 80e-6, inertia=0.005, leak_phase=0.35)
+    b = dataclasses.replace(a, name="motor B", displacement=107e-6, inertia=0.02, leak_phase=0.3,
+                            oil=dataclasses.replace(a.oil, nu40_cSt=32.0, name="VG 32"))
+    n = 64
+    theta, w = np.linspace(0.0, 6.0, n), np.linspace(-200.0, 300.0, n)
+    p = model.default_parameters(a)
+    for spec in (a, b):
+        s = model.make_samples(spec, theta, w, np.full(n, 2e7), np.full(n, 1e6), np.full(n, 2e5),
+                               np.full(n, 0.03), acceleration=np.linspace(-50.0, 50.0, n))
+        got = np.array(g(model.as_jax(p), spec, s))
+        want = np.array(jax.jit(lambda q, x: model.predict(q, spec, x))(model.as_jax(p), s))  # spec as constants
+        assert np.all(np.isfinite(got))
+        for i in range(4):  # torque, q_a, q_b, q_case
+            np.testing.assert_allclose(got[i], want[i], rtol=1e-12, atol=1e-12 * np.max(np.abs(want[i])))
+    assert len(g._memory) == 1  # one program for both motors
+    other = np.array(g(model.as_jax(p), a, s))  # and it is not motor B's answer for A
+    assert not np.allclose(other[0], got[0]) and not np.allclose(other[1], got[1])  # D, J: torque; D: port flow
