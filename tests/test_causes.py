@@ -111,8 +111,42 @@ def test_empirical_term_recovers_a_known_law_and_stays_silent_on_noise():
     assert abs(term.terms[0][1] - 5e-20) < 0.05 * 5e-20
     assert "m³" in term.formula and "Pa" in term.formula
     assert term.as_dict()["label"].startswith("empirical term")
+    assert term.shapes == [] and term.as_dict()["model_shapes_moved"] == []  # a law of its own, not a trade
     # pure noise: nothing to propose
     assert propose("q_case", x, sigma * rng.standard_normal(n), sigma, run_of, SPEC) is None
+
+
+def test_a_term_that_works_by_trading_with_the_models_own_shapes_is_printed_with_them():
+    """Low port at one pressure: P_A² is mostly the bearing-friction shape sgn ω·(P_A+P_B) and a
+    constant.  A residual that is only P_A²'s curvature (what those shapes leave of it) takes a
+    pressure-squared term whose own size is many times the change it makes; the formula alone would
+    claim tens of N·m.  It is printed with the shapes it moves, and the two together are the change."""
+    from motorid.discrepancy.empirical import NUISANCE_SHAPES, SHARED_RATIO, nuisance
+
+    rng = np.random.default_rng(8)
+    runs, per = 30, 60
+    n = runs * per
+    speed = np.repeat(rng.uniform(20.0, 300.0, runs), per)
+    p_a = np.repeat(rng.uniform(2e6, 2.5e7, runs), per)
+    p_b = np.full(n, 5e5)
+    x = model.make_samples(SPEC, rng.uniform(0, 2 * np.pi, n), speed, p_a, p_b, np.full(n, 7e4),
+                           np.full(n, 0.03))
+    N = nuisance("torque", x, SPEC)
+    square = (p_a - 7e4) ** 2
+    curvature = square - N @ np.linalg.lstsq(N, square, rcond=None)[0]
+    sigma = np.full(n, 0.02)
+    law = 0.5 * curvature / np.sqrt(np.mean(curvature**2))  # 0.5 N·m RMS
+    term = propose("torque", x, law + sigma * rng.standard_normal(n), sigma, np.repeat(np.arange(runs), per), SPEC)
+    assert term is not None and term.held_out_gain > 0.9
+    assert term.alone > SHARED_RATIO * term.size and abs(term.size - 0.5) < 0.05
+    words = [w for w, *_ in term.shapes]
+    assert "sgn ω·(P_A+P_B)" in words and "model's own shapes" in term.formula
+    # the printed pieces together are the change the term makes (what the listed shapes leave: < 5 % each)
+    shapes = dict((w, c) for w, _, _, c in term.shapes)
+    cols = {w: N[:, j] for j, (w, *_) in enumerate(NUISANCE_SHAPES["torque"])}
+    whole = sum(c * t.values(x) for t, c in term.terms) + sum(c * cols[w] for w, c in shapes.items())
+    assert abs(np.sqrt(np.mean((whole - whole.mean()) ** 2)) - term.size) < 0.1 * term.size
+    assert [d["term"] for d in term.as_dict()["model_shapes_moved"]] == words
 
 
 # ------------------------------------------------------------------ diagnose on concealed campaigns

@@ -131,6 +131,19 @@ def library(pistons: int, harmonics: bool = True, viscosity: bool = True) -> lis
     return terms
 
 
+#: per channel: the words and dimensions (exponents of Pa and s, as :attr:`Term.dims`) of the columns
+#: of :func:`nuisance`, in its order
+NUISANCE_SHAPES = {
+    "torque": [("1", 0, 0), ("sgn ω", 0, 0), ("sgn ω·(P_A+P_B)", 1, 0), ("μω", 1, 0)],
+    "q_a": [("1", 0, 0), ("(P_A−P_c)/μ", 0, -1), ("ΔP/μ", 0, -1)],
+    "q_b": [("1", 0, 0), ("(P_B−P_c)/μ", 0, -1), ("ΔP/μ", 0, -1)],
+    "q_case": [("1", 0, 0), ("(P_A+P_B−2P_c)/μ", 0, -1)],
+}
+#: a proposed term whose own size exceeds this multiple of the change it makes to the fitted curve
+#: is printed with the model's own shapes it moves (it works mostly by trading with them)
+SHARED_RATIO = 3.0
+
+
 def nuisance(channel: str, x, spec) -> np.ndarray:
     """Columns of the 1992 model's own shapes in this channel (left unpenalized)."""
     d = np.asarray(x.direction, float)
@@ -176,14 +189,22 @@ class EmpiricalTerm:
     terms: list  # [(Term, coefficient SI)]
     held_out_gain: float  # fraction of the held-out residual χ² (over the base) it removes, K-fold over runs
     region_gain: dict = field(default_factory=dict)  # split → fraction removed where not fitted
-    size: float = 0.0  # RMS of the term over the data [SI]
+    size: float = 0.0  # RMS of the change it makes to the fitted curve over the data [SI]
+    #: [(words, dims, coefficient change SI)]: the 1992 model's own shapes that move with the term,
+    #: listed where the term alone is more than SHARED_RATIO times ``size`` (see :func:`propose`)
+    shapes: list = field(default_factory=list)
+    alone: float = 0.0  # RMS of the term's own columns over the data [SI]
 
     @property
     def formula(self) -> str:
-        parts = []
-        for t, c in self.terms:
-            parts.append(f"{c:+.3g} {_unit(self.channel, t.dims)} · {t.text}")
-        return f"{_CH_SYMBOL[self.channel]} ≈ " + " ".join(parts).lstrip("+")
+        parts = [f"{c:+.3g} {_unit(self.channel, t.dims)} · {t.text}" for t, c in self.terms]
+        text = f"{_CH_SYMBOL[self.channel]} ≈ " + " ".join(parts).lstrip("+")
+        if self.shapes:
+            moved = " ".join(f"{c:+.3g} {_unit(self.channel, (pa, sec))}" + ("" if w == "1" else f" · {w}")
+                             for w, pa, sec, c in self.shapes)
+            text += (f", together with the model's own shapes refitted by {moved} (the term alone is "
+                     f"{self.alone / self.size:.3g}× the change it makes: read them as one)")
+        return text
 
     def as_dict(self) -> dict:
         unit, f = _ENG[self.channel]
@@ -191,6 +212,8 @@ class EmpiricalTerm:
                 "formula": self.formula,
                 "terms": [{"term": t.text, "coefficient": c, "unit": _unit(self.channel, t.dims)} for t, c in self.terms],
                 "size_rms": self.size, "size_words": f"{self.size * f:.3g} {unit} RMS over the logged points",
+                "model_shapes_moved": [{"term": w, "coefficient": c, "unit": _unit(self.channel, (pa, sec))}
+                                       for w, pa, sec, c in self.shapes],
                 "held_out_gain": self.held_out_gain, "region_gain": self.region_gain}
 
 
@@ -284,9 +307,20 @@ def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regi
     without[:k] = np.linalg.lstsq(Z[:, :k], y, rcond=None)[0] / scale[:k]
     design = np.column_stack([N, L])[ok]
     size = float(np.sqrt(np.mean((design @ (beta - without)) ** 2)))
+    # the term alone: where it is far larger than the change it makes, it works by trading with the
+    # model's own shapes (on a bench whose low port sits at one pressure, a ΔP term is K_F's shape
+    # sgn ω·(P_A+P_B) moved), and its formula alone would overstate it: those shapes are printed too
+    rms = lambda v: float(np.sqrt(np.mean(v**2)))  # noqa: E731
+    alone = rms(design[:, chosen_idx] @ beta[chosen_idx])
+    shapes = []
+    if alone > SHARED_RATIO * size:
+        shift = beta[:k] - without[:k]
+        for j, (words, pa, sec) in enumerate(NUISANCE_SHAPES[channel][:k]):
+            if rms(design[:, j] * shift[j]) >= 0.05 * alone:
+                shapes.append((words, pa, sec, float(shift[j])))
     gain = 1.0 - best / base if base > 0 else 0.0
     region_gain = region_gains(Z, y, k, list(chosen_idx), {n: np.asarray(m)[ok] for n, m in (regions or {}).items()})
-    return EmpiricalTerm(channel, chosen, float(gain), region_gain, size)
+    return EmpiricalTerm(channel, chosen, float(gain), region_gain, size, shapes, alone)
 
 
 def _distinct_columns(X) -> list:
