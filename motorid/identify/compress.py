@@ -190,6 +190,16 @@ class Expansion:
     def products(self, delta):
         return delta[..., self.a] * delta[..., self.b] * self.half
 
+    def derivative(self, delta):
+        """∂[δ; u(δ)]/∂δ at δ: (p + pairs) × p (the identity over δ, then one row per product)."""
+        p = len(self.names)
+        dz = np.zeros((p + len(self.pairs), p))
+        dz[:p] = np.eye(p)
+        for k, (a, b) in enumerate(self.pairs):
+            dz[p + k, a] += self.half[k] * delta[b]
+            dz[p + k, b] += self.half[k] * delta[a]
+        return dz
+
     def predict_channel(self, channel: str, delta, rows=slice(None)):
         """The expansion's prediction of one channel's real cells (or ``rows`` of them) at p0 + δ."""
         delta = np.asarray(delta, dtype=float)

@@ -122,12 +122,7 @@ def viscosity_jacobians(problem: Problem, values: dict, ctx: Ctx):
         order = [c for c in RUNNING_CHANNELS if c in ctx.observed]  # the residual's order
         return Jg[:n], {c: g[order.index(c)][:n] for c in running}
     p = len(free)
-    d = np.array([values[k] for k in exp.names]) - exp.p0
-    dz = np.zeros((p + len(exp.pairs), p))  # ∂[δ; u(δ)]/∂δ
-    dz[:p] = np.eye(p)
-    for k, (a, b) in enumerate(exp.pairs):
-        dz[p + k, a] += exp.half[k] * d[b]
-        dz[p + k, b] += exp.half[k] * d[a]
+    dz = exp.derivative(np.array([values[k] for k in exp.names]) - exp.p0)  # ∂[δ; u(δ)]/∂δ
     mu = np.asarray(ctx.running.viscosity, dtype=float)
     eps = 1e-6
     up = predictions_jit(as_arrays(values), ctx._replace(running=ctx.running._replace(viscosity=mu * (1 + eps))))
@@ -147,25 +142,12 @@ def viscosity_jacobians(problem: Problem, values: dict, ctx: Ctx):
     return Jg, gs
 
 
-def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):
-    """What the smoothed viscosity's run-level error does to the fit →
-    (parameter covariance [SI²], channel → variance of each run's mean residual [SI²]).
-
-    The extraction replaces each run's viscometer readings by a curve in time
-    (:func:`motorid.identify.viscosity.smooth_viscosity`); the curve's error δμ_r =
-    Σₖ modesₖ zₖ (z standard normal per run) is common to the run's samples, so
-    it does not show in the residual scatter the noise levels come from.  To
-    first order it moves the estimate by dβ/dz = (JᵀJ)⁻¹ Jᵀ (∂r/∂μ · modes) (J
-    and r weighted; a two-step estimator's plug-in correction, Murphy & Topel
-    1985), and adds Σ_run,k (dβ/dzₖ)(dβ/dzₖ)ᵀ to the covariance.  It also moves
-    each run's mean residual by the run mean of ∂prediction/∂μ · modes, which a
-    test of run means against the noise (:mod:`motorid.discrepancy.locate`) must
-    count.  ``cov`` is (JᵀJ)⁻¹ over ``problem.free``.  (None, {}) where no run's
-    viscosity was smoothed.
-    """
+def _viscosity_modes(problem: Problem):
+    """The smoothed viscosity's error modes at the cells: (cells × modes [Pa·s per unit z], run
+    bounds of the cells, the runs whose viscosity was smoothed, number of runs), or None where none was."""
     verr = getattr(problem.data, "viscosity_error", None)
     if verr is None or not verr.any or not problem.has_running or problem.cells is None:
-        return None, {}
+        return None
     n_cells, K = problem.n_cells, verr.factor.shape[1]
     counts = np.maximum(np.bincount(problem.cell_of, minlength=n_cells), 1)
     n_runs = max(len(problem.data.runs), int(problem.cell_run.max()) + 1)  # aligned with Dataset.runs
@@ -188,6 +170,59 @@ def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):
     cell_modes = np.zeros((n_cells, K))
     for r in smoothed:
         cell_modes[bounds[r]:bounds[r + 1]] = cell_basis[bounds[r]:bounds[r + 1]] @ verr.factor[r]
+    return cell_modes, bounds, smoothed, n_runs
+
+
+def _score_shifts(cell_modes, Jg, bounds, smoothed, n_runs: int) -> np.ndarray:
+    """Jᵀ ∂r/∂z per run and mode: (modes of the run's cells)ᵀ · Jg of those cells → runs × modes × free
+    (zero for a run whose viscosity was not smoothed)."""
+    B = np.zeros((n_runs, cell_modes.shape[1], Jg.shape[1]))
+    for r in smoothed:
+        B[r] = cell_modes[bounds[r]:bounds[r + 1]].T @ Jg[bounds[r]:bounds[r + 1]]
+    return B
+
+
+def viscosity_score_shifts(problem: Problem, values: dict):
+    """How each run's smoothed-viscosity error moves that run's score Σ r ∂r/∂β of each free parameter
+    (weighted residual r of its cells; :func:`viscosity_covariance`) → runs × modes × free (their squares
+    summed over the modes: the score's variance beyond the noise's), or None where no viscosity was smoothed."""
+    kept = getattr(problem, "viscosity_shifts", None)
+    if kept is not None and kept[0] == _shifts_key(problem, values):
+        return kept[1]
+    modes = _viscosity_modes(problem)
+    if modes is None:
+        return None
+    cell_modes, bounds, smoothed, n_runs = modes
+    Jg, _ = viscosity_jacobians(problem, values, problem.ctx())
+    return _score_shifts(cell_modes, Jg, bounds, smoothed, n_runs)
+
+
+def _shifts_key(problem: Problem, values: dict) -> tuple:
+    """What the viscosity's score shifts depend on: the free parameters, their values, the cells."""
+    return tuple(problem.free), tuple(float(values[k]) for k in problem.free), problem.cells_version
+
+
+def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):
+    """What the smoothed viscosity's run-level error does to the fit →
+    (parameter covariance [SI²], channel → variance of each run's mean residual [SI²]).
+
+    The extraction replaces each run's viscometer readings by a curve in time
+    (:func:`motorid.identify.viscosity.smooth_viscosity`); the curve's error δμ_r =
+    Σₖ modesₖ zₖ (z standard normal per run) is common to the run's samples, so
+    it does not show in the residual scatter the noise levels come from.  To
+    first order it moves the estimate by dβ/dz = (JᵀJ)⁻¹ Jᵀ (∂r/∂μ · modes) (J
+    and r weighted; a two-step estimator's plug-in correction, Murphy & Topel
+    1985), and adds Σ_run,k (dβ/dzₖ)(dβ/dzₖ)ᵀ to the covariance.  It also moves
+    each run's mean residual by the run mean of ∂prediction/∂μ · modes, which a
+    test of run means against the noise (:mod:`motorid.discrepancy.locate`) must
+    count.  ``cov`` is (JᵀJ)⁻¹ over ``problem.free``.  (None, {}) where no run's
+    viscosity was smoothed.
+    """
+    modes = _viscosity_modes(problem)
+    if modes is None:
+        return None, {}
+    cell_modes, bounds, smoothed, n_runs = modes
+    n_cells, K = cell_modes.shape
     ctx = problem.ctx()
     Jg, gs = viscosity_jacobians(problem, values, ctx)
     p = Jg.shape[1]
@@ -204,9 +239,9 @@ def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):
         shift[filled] = np.add.reduceat((n_in * slope)[:, None] * cell_modes, bounds[filled], axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
             run_var[c] = np.where(tot > 0, np.sum(shift**2, axis=1) / np.maximum(tot, 1e-300) ** 2, 0.0)
-    # Jᵀ ∂r/∂z per run and mode: (modes of the run's cells)ᵀ · Jg of those cells
-    B = np.stack([cell_modes[bounds[r]:bounds[r + 1]].T @ Jg[bounds[r]:bounds[r + 1]] for r in smoothed]) \
-        if smoothed.size else np.zeros((0, K, p))
+    shifts = _score_shifts(cell_modes, Jg, bounds, smoothed, n_runs)
+    problem.viscosity_shifts = (_shifts_key(problem, values), shifts)  # the runs' check asks again
+    B = shifts[smoothed]
     A = B.reshape(-1, p) @ cov  # dβ/dz, one row per (run, mode)
     out = A.T @ A
     return 0.5 * (out + out.T), run_var

@@ -27,7 +27,7 @@ from motorid.identify.noise import breakaway_noise, floor_noise, initial_noise, 
 from motorid.identify.problem import Problem
 from motorid.identify.run_scatter import widen_by_run_scatter
 from motorid.identify.solver import backend_for, gauss_newton_start, solve
-from motorid.identify.types import RUNNING_CHANNELS, FitOptions, FitResult
+from motorid.identify.types import BREAKAWAY_ONLY, RUNNING_CHANNELS, FitOptions, FitResult
 from motorid.robust import robust_std
 from motorid.units import CHANNEL_WORDS
 
@@ -302,8 +302,11 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         problem=problem, covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var,
         breakaway_noise_shape=noise.gamma, covariance_breakaway=cov_brk, noise_correlation=taus,
     )
-    if opt.uncertainty and any("." in k for k in free):
-        # a mechanism's parameter whose runs disagree (a law that holds on average, an input with errors of
-        # its own such as the acceleration behind an inertia error): its standard error widened
-        result.warnings.extend(widen_by_run_scatter(result, [k for k in free if "." in k], data))
+    if opt.uncertainty and free:
+        # a parameter whose runs disagree (a law that holds on average, an input with errors of its own such
+        # as the acceleration behind an inertia error, a transducer's gain or zero): its standard error
+        # widened; K_FS and K_s not where the breakaway sandwich already widened them for the events'
+        # scatter (the same excess, counted once)
+        checked = [k for k in free if not (k in BREAKAWAY_ONLY and cov_brk is not None)]
+        result.warnings.extend(widen_by_run_scatter(result, checked, data))
     return result
