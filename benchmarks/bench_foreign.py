@@ -246,12 +246,15 @@ WHY = {
         "density as ρ15(1 − β(T − 15)) where motorid takes ρ15/(1 + β(T − 15)) (the two differ by β²(T − 15)², "
         "0.03 % at 40 °C).  K_L0 and K_AB go as 1/μ one for one, so they move by that much, many standard "
         "errors on a long campaign; result.json's warnings say that these parameters carry the oil model's "
-        "error and that their std does not include it."),
+        "error.  The error grows with the oil temperature, so K_L0's runs disagree and its std is widened by "
+        "their scatter (2×); K_AB's are not (its runs agree within p = 0.01)."),
     "n12_offsets_gains": (
         "0.05 % gain errors and zero offsets of the transducers: no term of the 1992 model absorbs them and "
         "the logs cannot tell them from the motor (a torque-gain error reads as a K_F error of D·ΔP/2π·0.05 % "
-        "over the friction, 0.8 % here).  The standard errors are statistical; a bench's calibration "
-        "uncertainty adds to them."),
+        "over the friction, 0.8 % here).  Where the errors make the runs disagree, the standard errors are "
+        "widened by the runs' scatter (K_v, K_F, T_Fc about 12-20×, K_L0 4×, K_AB 5×; result.json's warnings), "
+        "which brings K_F within 2.7 of them; a gain the same in every run leaves the runs agreeing, and its "
+        "bias stays outside the standard errors (K_L0, K_L_b1, K_AB)."),
 }
 
 
