@@ -276,7 +276,7 @@ def _run(quick: bool, py: str, tmp: Path) -> str:
         "|---|---:|---:|---:|",
         *[f"| `{k}`: {what} | {c} | {t:.3f} | {100 * t / parts_total:.0f} % |"
           for k, (c, t, what) in parts.items()],
-        f"| the rest (numpy): cells, noise per run, Hampel test, Gram matrices, covariance | — | "
+        f"| the rest (numpy): cells, noise per run, Hampel test, Gram matrices, covariance, the runs' check | — | "
         f"{parts_total - sum(t for _, t, _ in parts.values()):.3f} | "
         f"{100 * (1 - sum(t for _, t, _ in parts.values()) / parts_total):.0f} % |",
         "",
