@@ -35,3 +35,22 @@ def test_per_run_transducer_zeros_widen_the_base_parameters_to_honest_errors():
     z = {k: (fit.values[k] - v) / fit.std[k] for k, v in truth["parameters"].items()}
     assert max(abs(v) for v in z.values()) < 3.0, z
     assert abs(z["KF"]) * widened["KF"] > 10  # with the noise's error alone: far off
+
+
+def test_the_bayesian_fit_spreads_its_draws_as_the_runs_scatter_widened_the_standard_errors():
+    """The sampler works at the likelihood's own width (a start 38× too wide would have to contract
+    first) and then spreads each widened parameter's draws by its factor: a widened parameter's
+    posterior standard deviation stands to its least-squares one as an unwidened parameter's does
+    (about 1/√(χ²/dof) here: the least-squares fit also scales its covariance by χ²/dof = 5.1, which
+    the posterior does not)."""
+    from motorid.identify.bayes import sample_posterior
+
+    spec, _, fit, _ = concealed("causes_per_run_offsets")
+    post = sample_posterior(fit, spec, seed=3, max_seconds=120)
+    assert post.converged
+    assert fit.run_scatter["KF"] > 10 and "KFS" not in fit.run_scatter
+    plain = post.std["KFS"] / fit.std["KFS"]
+    assert abs(plain - 1 / np.sqrt(fit.chi2 / fit.dof)) < 0.1
+    for k in ("KF", "TFc", "KL0", "KAB"):
+        assert 0.8 < post.std[k] / fit.std[k] / plain < 1.25, (k, post.std[k], fit.std[k])
+    assert any(w.startswith("KF: the draws are spread") for w in post.warnings)

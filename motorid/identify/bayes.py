@@ -179,7 +179,10 @@ class _Target:
         names = list(ls.free)
         ndim = len(names)
         self.center = np.array([ls.values[k] for k in names])
-        std = np.array([ls.std[k] for k in names])
+        # the likelihood's own width: a standard error widened by the runs' scatter is not (the draws
+        # are spread by that factor afterwards, _with_run_scatter)
+        spread = getattr(ls, "run_scatter", None) or {}
+        std = np.array([ls.std[k] / spread.get(k, 1.0) for k in names])
         self.scale = np.where(std > 0, std, np.abs(self.center) * 1e-3 + 1e-300)
         self.positive = np.array([model.parameter_info(k, ls.mechanisms).positive for k in names])
         self.prior_sd = np.array([prior_scale(k, spec, ls.mechanisms) for k in names])
@@ -289,6 +292,21 @@ def _with_viscosity_error(ls: FitResult, chain, rng):
     return chain
 
 
+def _with_run_scatter(ls: FitResult, chain, burn: int, warnings: list):
+    """Each parameter whose runs disagree beyond their errors (``ls.run_scatter``: name → R, the
+    factor its least-squares standard error was widened by, :mod:`motorid.identify.run_scatter`):
+    its draws spread about their mean by R, as that standard error was (correlations kept)."""
+    spread = getattr(ls, "run_scatter", None) or {}
+    for i, k in enumerate(ls.free):
+        factor = spread.get(k)
+        if factor and factor > 1.0:
+            mean = float(np.mean(chain[burn:, :, i]))
+            chain[:, :, i] = mean + factor * (chain[:, :, i] - mean)
+            warnings.append(f"{k}: the draws are spread {factor:.3g}× about their mean, as its runs' own "
+                            "estimates scatter that much beyond their errors (the least-squares fit's warning)")
+    return chain
+
+
 def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
                      min_tau_multiple: float = 50.0, max_steps: int = 40000, chunk: int = 500,
                      seed: int = 0, progress: bool | None = None, max_seconds: float | None = None,
@@ -337,6 +355,7 @@ def sample_posterior(ls: FitResult, spec, walkers: int | None = None,
             return sample_posterior(ls, spec, walkers, min_tau_multiple, max_steps, chunk, seed, progress,
                                     max_seconds, fast=False, prior=prior, marginal_breakaway=marginal_breakaway)
     chain = _with_viscosity_error(ls, target.center + chain_z * target.scale, rng)
+    chain = _with_run_scatter(ls, chain, burn, warnings)
     flat = chain[burn::thin].reshape(-1, ndim)
     q = np.percentile(flat, [2.5, 50.0, 97.5], axis=0)
     kept = (sampler.iteration - burn) * walkers

@@ -152,6 +152,7 @@ def widen_by_run_scatter(fit, names, data) -> list[str]:
         cov[:, i] *= factor
         fit.covariance = cov
         fit.std[name] = float(fit.std[name]) * factor
+        fit.run_scatter = {**(getattr(fit, "run_scatter", None) or {}), name: factor}
         notes.append(f"{name}: its {runs} runs' own estimates scatter {factor:.3g}× beyond their errors, so its "
                      f"standard error is widened by that factor (a law that holds on average, an input of the "
                      f"model with errors of its own, or a transducer error the model does not hold)")
