@@ -191,7 +191,8 @@ class EmpiricalTerm:
     region_gain: dict = field(default_factory=dict)  # split → fraction removed where not fitted
     size: float = 0.0  # RMS of the change it makes to the fitted curve over the data [SI]
     #: [(words, dims, coefficient change SI)]: the 1992 model's own shapes that move with the term,
-    #: listed where the term alone is more than SHARED_RATIO times ``size`` (see :func:`propose`)
+    #: listed where the term alone is more than SHARED_RATIO times ``size`` (see :func:`propose`; each
+    #: shape whose own change is ≥ 5 % of ``size``)
     shapes: list = field(default_factory=list)
     alone: float = 0.0  # RMS of the term's own columns over the data [SI]
 
@@ -313,10 +314,10 @@ def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regi
     rms = lambda v: float(np.sqrt(np.mean(v**2)))  # noqa: E731
     alone = rms(design[:, chosen_idx] @ beta[chosen_idx])
     shapes = []
-    if alone > SHARED_RATIO * size:
+    if size > 0 and alone > SHARED_RATIO * size:
         shift = beta[:k] - without[:k]
         for j, (words, pa, sec) in enumerate(NUISANCE_SHAPES[channel][:k]):
-            if rms(design[:, j] * shift[j]) >= 0.05 * alone:
+            if rms(design[:, j] * shift[j]) >= 0.05 * size:  # every shape that moves 5 % of the change
                 shapes.append((words, pa, sec, float(shift[j])))
     gain = 1.0 - best / base if base > 0 else 0.0
     region_gain = region_gains(Z, y, k, list(chosen_idx), {n: np.asarray(m)[ok] for n, m in (regions or {}).items()})

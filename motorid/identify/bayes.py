@@ -304,6 +304,9 @@ def _with_run_scatter(ls: FitResult, chain, burn: int, warnings: list):
             chain[:, :, i] = mean + factor * (chain[:, :, i] - mean)
             warnings.append(f"{k}: the draws are spread {factor:.3g}× about their mean, as its runs' own "
                             "estimates scatter that much beyond their errors (the least-squares fit's warning)")
+            if model.parameter_info(k, ls.mechanisms).positive and np.any(chain[burn:, :, i] <= 0):
+                warnings.append(f"{k}: some of its spread draws are not positive, which the parameter must be: "
+                                "its interval is a Gaussian reading of the runs' scatter, not a posterior")
     return chain
 
 

@@ -198,8 +198,10 @@ def viscosity_score_shifts(problem: Problem, values: dict):
 
 
 def _shifts_key(problem: Problem, values: dict) -> tuple:
-    """What the viscosity's score shifts depend on: the free parameters, their values, the cells."""
-    return tuple(problem.free), tuple(float(values[k]) for k in problem.free), problem.cells_version
+    """What the viscosity's score shifts depend on: the model, its free and held parameters' values, the cells."""
+    return (tuple(getattr(m, "id", repr(m)) for m in problem.mechanisms), tuple(problem.free),
+            tuple(float(values[k]) for k in problem.free),
+            tuple(sorted((k, float(v)) for k, v in problem.held.items())), problem.cells_version)
 
 
 def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):

@@ -307,6 +307,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         # as the acceleration behind an inertia error, a transducer's gain or zero): its standard error
         # widened; K_FS and K_s not where the breakaway sandwich already widened them for the events'
         # scatter (the same excess, counted once)
-        checked = [k for k in free if not (k in BREAKAWAY_ONLY and cov_brk is not None)]
+        checked = [k for i, k in enumerate(free)
+                   if not (k in BREAKAWAY_ONLY and cov_brk is not None and cov_brk[i, i] > 0)]
         result.warnings.extend(widen_by_run_scatter(result, checked, data))
     return result

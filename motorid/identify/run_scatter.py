@@ -137,7 +137,8 @@ def widen_by_run_scatter(fit, names, data) -> list[str]:
         per_run = per_run_sums(fit, problem, data)
         if per_run is None:
             return []
-        shifts = viscosity_score_shifts(problem, {k: fit.params_all[k] for k in problem.free})
+        if getattr(fit, "covariance_viscosity", None) is not None:  # only where the covariance counts it
+            shifts = viscosity_score_shifts(problem, {k: fit.params_all[k] for k in problem.free})
     for name in names:
         out = birge_ratio(fit, name, data, shifts, per_run)
         if out is None:
