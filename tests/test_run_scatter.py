@@ -5,7 +5,6 @@ called scatter (issue 15: an honest uncertainty where transducer zeros change fr
 import numpy as np
 
 from conftest import concealed
-from motorid.identify.covariance import viscosity_score_shifts
 from motorid.identify.run_scatter import birge_ratio
 
 
@@ -16,7 +15,8 @@ def test_the_viscosity_error_explains_the_leakage_runs_scatter_on_a_clean_campai
     fit widens nothing."""
     _, ds, fit, _ = concealed("clean_9_seed102")
     assert not any("scatter" in w for w in fit.warnings), fit.warnings
-    shifts = viscosity_score_shifts(fit.problem, {k: fit.params_all[k] for k in fit.problem.free})
+    shifts = fit.viscosity_shifts
+    assert shifts is not None and shifts.shape[2] == len(fit.free)
     noise_only, runs = birge_ratio(fit, "KL0", ds)
     counted, _ = birge_ratio(fit, "KL0", ds, shifts)
     assert runs >= 30 and noise_only > 1.5**2 and counted < 1.35**2

@@ -127,7 +127,7 @@ class Screen:
     def _problem(self, mechanisms, free, held, weights=None) -> Problem:
         prob = copy.copy(self.template)
         prob.free, prob.held, prob.mechanisms = list(free), dict(held), tuple(mechanisms)
-        prob.expansion = prob.expansion_key = prob.compressed = prob.viscosity_shifts = None
+        prob.expansion = prob.expansion_key = prob.compressed = None
         if weights is not None:
             prob.cells = (self.template.cells[0], weights)
             prob.cells_version = next(_versions)

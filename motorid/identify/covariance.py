@@ -142,12 +142,27 @@ def viscosity_jacobians(problem: Problem, values: dict, ctx: Ctx):
     return Jg, gs
 
 
-def _viscosity_modes(problem: Problem):
-    """The smoothed viscosity's error modes at the cells: (cells × modes [Pa·s per unit z], run
-    bounds of the cells, the runs whose viscosity was smoothed, number of runs), or None where none was."""
+def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):
+    """What the smoothed viscosity's run-level error does to the fit →
+    (parameter covariance [SI²], channel → variance of each run's mean residual [SI²], score shifts).
+
+    The extraction replaces each run's viscometer readings by a curve in time
+    (:func:`motorid.identify.viscosity.smooth_viscosity`); the curve's error δμ_r =
+    Σₖ modesₖ zₖ (z standard normal per run) is common to the run's samples, so
+    it does not show in the residual scatter the noise levels come from.  To
+    first order it moves the estimate by dβ/dz = (JᵀJ)⁻¹ Jᵀ (∂r/∂μ · modes) (J
+    and r weighted; a two-step estimator's plug-in correction, Murphy & Topel
+    1985), and adds Σ_run,k (dβ/dzₖ)(dβ/dzₖ)ᵀ to the covariance.  It also moves
+    each run's mean residual by the run mean of ∂prediction/∂μ · modes, which a
+    test of run means against the noise (:mod:`motorid.discrepancy.locate`) must
+    count.  The score shifts Jᵀ ∂r/∂zₖ per run and mode (runs × modes × free, zero for a run whose
+    viscosity was not smoothed) are what the error moves each run's score Σ r ∂r/∂β by: the runs'
+    check (:mod:`motorid.identify.run_scatter`) counts them in each run's error.  ``cov`` is (JᵀJ)⁻¹
+    over ``problem.free``.  (None, {}, None) where no run's viscosity was smoothed.
+    """
     verr = getattr(problem.data, "viscosity_error", None)
     if verr is None or not verr.any or not problem.has_running or problem.cells is None:
-        return None
+        return None, {}, None
     n_cells, K = problem.n_cells, verr.factor.shape[1]
     counts = np.maximum(np.bincount(problem.cell_of, minlength=n_cells), 1)
     n_runs = max(len(problem.data.runs), int(problem.cell_run.max()) + 1)  # aligned with Dataset.runs
@@ -170,61 +185,6 @@ def _viscosity_modes(problem: Problem):
     cell_modes = np.zeros((n_cells, K))
     for r in smoothed:
         cell_modes[bounds[r]:bounds[r + 1]] = cell_basis[bounds[r]:bounds[r + 1]] @ verr.factor[r]
-    return cell_modes, bounds, smoothed, n_runs
-
-
-def _score_shifts(cell_modes, Jg, bounds, smoothed, n_runs: int) -> np.ndarray:
-    """Jᵀ ∂r/∂z per run and mode: (modes of the run's cells)ᵀ · Jg of those cells → runs × modes × free
-    (zero for a run whose viscosity was not smoothed)."""
-    B = np.zeros((n_runs, cell_modes.shape[1], Jg.shape[1]))
-    for r in smoothed:
-        B[r] = cell_modes[bounds[r]:bounds[r + 1]].T @ Jg[bounds[r]:bounds[r + 1]]
-    return B
-
-
-def viscosity_score_shifts(problem: Problem, values: dict):
-    """How each run's smoothed-viscosity error moves that run's score Σ r ∂r/∂β of each free parameter
-    (weighted residual r of its cells; :func:`viscosity_covariance`) → runs × modes × free (their squares
-    summed over the modes: the score's variance beyond the noise's), or None where no viscosity was smoothed."""
-    kept = getattr(problem, "viscosity_shifts", None)
-    if kept is not None and kept[0] == _shifts_key(problem, values):
-        return kept[1]
-    modes = _viscosity_modes(problem)
-    if modes is None:
-        return None
-    cell_modes, bounds, smoothed, n_runs = modes
-    Jg, _ = viscosity_jacobians(problem, values, problem.ctx())
-    return _score_shifts(cell_modes, Jg, bounds, smoothed, n_runs)
-
-
-def _shifts_key(problem: Problem, values: dict) -> tuple:
-    """What the viscosity's score shifts depend on: the model, its free and held parameters' values, the cells."""
-    return (tuple(getattr(m, "id", repr(m)) for m in problem.mechanisms), tuple(problem.free),
-            tuple(float(values[k]) for k in problem.free),
-            tuple(sorted((k, float(v)) for k, v in problem.held.items())), problem.cells_version)
-
-
-def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):
-    """What the smoothed viscosity's run-level error does to the fit →
-    (parameter covariance [SI²], channel → variance of each run's mean residual [SI²]).
-
-    The extraction replaces each run's viscometer readings by a curve in time
-    (:func:`motorid.identify.viscosity.smooth_viscosity`); the curve's error δμ_r =
-    Σₖ modesₖ zₖ (z standard normal per run) is common to the run's samples, so
-    it does not show in the residual scatter the noise levels come from.  To
-    first order it moves the estimate by dβ/dz = (JᵀJ)⁻¹ Jᵀ (∂r/∂μ · modes) (J
-    and r weighted; a two-step estimator's plug-in correction, Murphy & Topel
-    1985), and adds Σ_run,k (dβ/dzₖ)(dβ/dzₖ)ᵀ to the covariance.  It also moves
-    each run's mean residual by the run mean of ∂prediction/∂μ · modes, which a
-    test of run means against the noise (:mod:`motorid.discrepancy.locate`) must
-    count.  ``cov`` is (JᵀJ)⁻¹ over ``problem.free``.  (None, {}) where no run's
-    viscosity was smoothed.
-    """
-    modes = _viscosity_modes(problem)
-    if modes is None:
-        return None, {}
-    cell_modes, bounds, smoothed, n_runs = modes
-    n_cells, K = cell_modes.shape
     ctx = problem.ctx()
     Jg, gs = viscosity_jacobians(problem, values, ctx)
     p = Jg.shape[1]
@@ -241,12 +201,13 @@ def viscosity_covariance(problem: Problem, values: dict, cov: np.ndarray):
         shift[filled] = np.add.reduceat((n_in * slope)[:, None] * cell_modes, bounds[filled], axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
             run_var[c] = np.where(tot > 0, np.sum(shift**2, axis=1) / np.maximum(tot, 1e-300) ** 2, 0.0)
-    shifts = _score_shifts(cell_modes, Jg, bounds, smoothed, n_runs)
-    problem.viscosity_shifts = (_shifts_key(problem, values), shifts)  # the runs' check asks again
-    B = shifts[smoothed]
-    A = B.reshape(-1, p) @ cov  # dβ/dz, one row per (run, mode)
+    # Jᵀ ∂r/∂z per run and mode: (modes of the run's cells)ᵀ · Jg of those cells
+    shifts = np.zeros((n_runs, K, p))
+    for r in smoothed:
+        shifts[r] = cell_modes[bounds[r]:bounds[r + 1]].T @ Jg[bounds[r]:bounds[r + 1]]
+    A = shifts[smoothed].reshape(-1, p) @ cov  # dβ/dz, one row per (run, mode)
     out = A.T @ A
-    return 0.5 * (out + out.T), run_var
+    return 0.5 * (out + out.T), run_var, shifts
 
 
 def interval_dof(ls: FitResult) -> dict:

@@ -146,16 +146,16 @@ def _uncertainty(problem: Problem, values: dict, free: list, opt: FitOptions, re
                  inliers: dict, chi2: float, dof: int):
     """Covariance of the free parameters in natural units from the weighted Jacobian of the
     cells at the optimum, widened by the breakaway sandwich and by χ²/dof > 1, plus the
-    smoothed viscosity's share → (cov, corr, std, cov_visc, visc_run_var, cov_brk)."""
+    smoothed viscosity's share → (cov, corr, std, cov_visc, visc_run_var, cov_brk, visc_shifts)."""
     JtJ = np.zeros((0, 0))
     if not opt.uncertainty:
         n = len(free)
-        return np.zeros((n, n)), np.eye(n), np.zeros(n), None, {}, None
+        return np.zeros((n, n)), np.eye(n), np.zeros(n), None, {}, None, None
     if free:
         JtJ = backend_for(problem, values, free, opt).normal(values)[0]
     cov = covariance_from_normal(JtJ) if free else np.zeros((0, 0))
-    cov_visc, visc_run_var = (viscosity_covariance(problem, values, cov) if (free and opt.viscosity_error)
-                              else (None, {}))
+    cov_visc, visc_run_var, visc_shifts = (viscosity_covariance(problem, values, cov)
+                                           if (free and opt.viscosity_error) else (None, {}, None))
     cov_brk = breakaway_sandwich(problem, values, cov, residuals.get("breakaway"), sig.get("breakaway"),
                                  inliers.get("breakaway")) if free and "breakaway" in residuals else None
     if cov_brk is not None:
@@ -168,7 +168,7 @@ def _uncertainty(problem: Problem, values: dict, free: list, opt: FitOptions, re
     std = np.sqrt(np.clip(np.diag(cov), 0, None)) if free else np.zeros(0)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std) if free else cov
-    return cov, corr, std, cov_visc, visc_run_var, cov_brk
+    return cov, corr, std, cov_visc, visc_run_var, cov_brk, visc_shifts
 
 
 def _correlated_noise(problem: Problem, noise, residuals, sig, inliers, run_of, warnings) -> dict:
@@ -289,8 +289,8 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     # fits with the noise held (diagnose's comparisons of candidates) keep per-sample weights
     taus = {} if opt.fixed_noise is not None else _correlated_noise(problem, noise, residuals, sig, inliers,
                                                                       run_of, warnings)
-    cov, corr, std, cov_visc, visc_run_var, cov_brk = _uncertainty(problem, values, free, opt, residuals, sig,
-                                                                   inliers, chi2, dof)
+    cov, corr, std, cov_visc, visc_run_var, cov_brk, visc_shifts = _uncertainty(
+        problem, values, free, opt, residuals, sig, inliers, chi2, dof)
     all_params = {**{k: float(v) for k, v in problem.held.items()}, **{k: float(v) for k, v in values.items()}}
     out_values, out_std, ident = _reported(names, free, fixed, values, std, reasons, start, mechanisms, warnings)
     result = FitResult(
@@ -299,7 +299,7 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
         outliers={c: int(np.sum(np.isfinite(obs[c]) & ~inliers[c])) for c in obs},
         used=used, chi2=chi2, dof=dof, steps=steps_total, converged=bool(converged), warnings=warnings,
         residuals=residuals, sigma=sig, inliers=inliers, params_all=all_params, mechanisms=tuple(mechanisms),
-        problem=problem, covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var,
+        problem=problem, covariance_viscosity=cov_visc, viscosity_run_variance=visc_run_var, viscosity_shifts=visc_shifts,
         breakaway_noise_shape=noise.gamma, covariance_breakaway=cov_brk, noise_correlation=taus,
     )
     if opt.uncertainty and free:

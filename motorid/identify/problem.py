@@ -268,9 +268,6 @@ class Problem:
         # named by expansion_key (None: not built, or the model is not quadratic), and the
         # compressed backend of the current cells (motorid.identify.solver.backend)
         self.expansion, self.expansion_key, self.compressed = None, None, None
-        # (key, runs × modes × free): the smoothed viscosity's score shifts the covariance made, which
-        # the runs' check reuses (motorid.identify.covariance.viscosity_score_shifts)
-        self.viscosity_shifts = None
 
     def n_real(self, channel: str) -> int:
         """How many of a channel's (padded) cells or events are real."""

@@ -8,8 +8,9 @@ residuals ρ over the cells the fit solved on (its weights, the noise levels and
 correlated noise included, are the covariance's): δ_r = −Σ ρ ∂ρ/∂p / Σ (∂ρ/∂p)² over the run's
 cells and events (δ_r is the run's departure from the common value), with standard error
 1/√Σ(∂ρ/∂p)², widened where the run's viscosity was smoothed by what that curve's error
-moves the run's score (:func:`~motorid.identify.covariance.viscosity_score_shifts`: an error common
-to the run's samples, which the noise levels do not hold; without it, K_L0's runs scatter up to 1.7×
+moves the run's score (the fit's ``viscosity_shifts``, from
+:func:`~motorid.identify.covariance.viscosity_covariance`: an error common to the run's samples,
+which the noise levels do not hold; without it, K_L0's runs scatter up to 1.7×
 beyond their noise on clean simulated campaigns, 0.76-1.21× with it).  Their Birge ratio
 R² = Σ (δ_r/se_r)² / (N − 1) is about 1 where the runs agree;
 where R² exceeds the χ² test's 1 % point, the parameter's standard error is widened by R (Birge
@@ -64,16 +65,16 @@ def per_run_sums(fit, problem, data) -> tuple | None:
     n = max([int(np.max(v)) + 1 for v in by_channel.values() if v.size] + [0])
     exp = problem.expansion
     if exp is not None and problem.expansion_key == tuple(problem.free) and all(c in exp.blocks for c in order):
+        # the expansion is over problem.free, in its order
         d = np.array([values[k] for k in exp.names]) - exp.p0
-        z, dz = np.concatenate([d, exp.products(d)]), exp.derivative(d)
-        col = [exp.names.index(k) for k in problem.free]
-        info, score = np.zeros((n, len(col))), np.zeros((n, len(col)))
+        dz = exp.derivative(d)
+        info, score = np.zeros((n, d.size)), np.zeros((n, d.size))
         for c in order:
-            n_real, nz, X, f0 = exp.blocks[c]
+            n_real, nz, X, _ = exp.blocks[c]
             wc = np.asarray(w[c], dtype=float)[:n_real]
-            rho = wc * (np.asarray(obs[c], dtype=float)[:n_real] - (f0 + z[nz] @ X))
+            rho = wc * (np.asarray(obs[c], dtype=float)[:n_real] - exp.predict_channel(c, d))
             # einsum, not a threaded BLAS that wakes against XLA's threads (about 20× slower here)
-            slopes = -wc[:, None] * np.einsum("tn,tp->np", X, dz[nz][:, col])
+            slopes = -wc[:, None] * np.einsum("tn,tp->np", X, dz[nz])
             i_c, s_c = _sums_by_run(np.asarray(by_channel[c])[:n_real], rho, slopes, n)
             info += i_c
             score += s_c
@@ -97,7 +98,7 @@ def birge_ratio(fit, name: str, data, shifts=None, per_run=None) -> tuple[float,
     """(R², N runs) of fitted parameter ``name`` of ``fit`` (on ``data``, its Dataset), or None where
     fewer than :data:`MIN_RUNS` runs carry information on it (a run's own standard error within
     10× the fit's) or the fit keeps no problem.  ``shifts``: the viscosity's score shifts of the
-    fit's problem (runs × modes × free, :func:`~motorid.identify.covariance.viscosity_score_shifts`);
+    fit (runs × modes × free, ``FitResult.viscosity_shifts``);
     ``per_run``: :func:`per_run_sums` of the fit, where already made."""
     problem = getattr(fit, "problem", None)
     std, value = fit.std.get(name), fit.values.get(name)
@@ -128,17 +129,14 @@ def widen_by_run_scatter(fit, names, data) -> list[str]:
     parameter."""
     from scipy.special import chdtrc
 
-    from motorid.identify.covariance import viscosity_score_shifts
-
     notes = []
     problem = getattr(fit, "problem", None)
-    shifts = per_run = None
+    shifts = getattr(fit, "viscosity_shifts", None)  # None where the covariance does not count the viscosity
+    per_run = None
     if problem is not None and getattr(problem, "cells", None) is not None and names:
         per_run = per_run_sums(fit, problem, data)
         if per_run is None:
             return []
-        if getattr(fit, "covariance_viscosity", None) is not None:  # only where the covariance counts it
-            shifts = viscosity_score_shifts(problem, {k: fit.params_all[k] for k in problem.free})
     for name in names:
         out = birge_ratio(fit, name, data, shifts, per_run)
         if out is None:

@@ -309,6 +309,9 @@ class FitResult:
     # channel -> integrated autocorrelation time of its residuals [samples], where above
     # noise.correlation_threshold and the covariance was widened by it
     noise_correlation: dict = field(default_factory=dict)
+    # how the smoothed viscosity's run-level error moves each run's score of each free parameter
+    # (runs × modes × free; :func:`viscosity_covariance`), None where it was not counted
+    viscosity_shifts: np.ndarray | None = None
     # parameter -> the factor its standard error was widened by where its runs disagree
     # (:mod:`motorid.identify.run_scatter`; the Bayesian fit spreads its draws by the same)
     run_scatter: dict = field(default_factory=dict)
