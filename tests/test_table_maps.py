@@ -175,3 +175,55 @@ def test_a_map_never_seen_fits_within_the_same_margins(tmp_path):
     for c, s in si.items():
         for kind in ("kfold", "extrapolate_pressure", "extrapolate_speed"):
             assert h[kind][c]["rms"] < 1.3 * s, (c, kind, h[kind][c]["rms"], s)
+
+
+# --------------------------------------------------------------------------- coordinate matrices
+
+def test_a_four_quadrant_map_with_coordinate_matrices_for_axes(tmp_path, capsys):
+    """A lab's .mat holds the map as four equal matrices (as MATLAB's meshgrid writes them): ΔP signed
+    over the rows (-300 … 300 bar, port B high below 0), speed signed in rad/s over the columns, the
+    shaft turning the other way from the format's, torque, and flow in m³/s counted the other way.
+    Every cell is one point (no outer product of 'vectors' of 10⁴ cells: that took all the memory),
+    the zero-speed torques are set aside, and the truth comes back within 4 σ."""
+    from scipy.io import savemat
+
+    dps = np.array([-300.0, -200.0, -120.0, -60.0, 0.0, 60.0, 120.0, 200.0, 300.0])  # bar, signed
+    rpm = np.array([-3000.0, -1800.0, -900.0, -300.0, 0.0, 300.0, 900.0, 1800.0, 3000.0])
+    P, N = np.meshgrid(dps, rpm, indexing="ij")
+    grid = np.column_stack([N.ravel(), np.maximum(P.ravel(), 0.0), np.maximum(-P.ravel(), 0.0)])
+    noise = {"torque_Nm": 0.2, "q_a_lpm": 0.05}
+    df = simulate_map(SPEC_80, TRUTH_80, grid, noise=noise, rng=np.random.default_rng(44))
+    shape = P.shape
+    savemat(tmp_path / "lab_map.mat", {
+        "P_4Q": P * 1e5, "w_4Q": -N.reshape(shape) * RPM,
+        "T_4Q": df["torque_Nm"].to_numpy().reshape(shape),
+        "Q_4Q": -df["q_a_lpm"].to_numpy().reshape(shape) / 6e4})
+    (tmp_path / "lab.toml").write_text("""
+[constants]
+oil_temp_C = 50.0
+[grid]
+axes = ["dp_bar", "speed_rpm"]
+[channels]
+dp_bar    = {name = "P_4Q", unit = "Pa"}
+speed_rpm = {name = "w_4Q", unit = "rad/s", sign = -1}
+torque_Nm = {name = "T_4Q", unit = "N*m"}
+q_a_lpm   = {name = "Q_4Q", unit = "m3/s", sign = -1}
+""")
+    motor = tmp_path / "motor.toml"
+    motor.write_text(SPEC_80.to_toml())
+    args = ["fit", str(tmp_path / "lab_map.mat"), "--channels", str(tmp_path / "lab.toml"), "--motor", str(motor),
+            "--out", str(tmp_path / "r"), "--quiet"]
+    assert main(args) == 0, capsys.readouterr().err
+    doc = json.loads((tmp_path / "r" / "result.json").read_text())
+    assert doc["table"]["points"] == P.size
+    p = doc["parameters"]
+    _check_recovered({k: v["value"] for k, v in p.items()}, {k: v["std"] for k, v in p.items()}, TRUTH_80,
+                     ("Kv", "KF", "TFc", "KL0"))
+    # one axis a matrix, the other a vector: refused in one line naming both
+    savemat(tmp_path / "bad.mat", {"P_4Q": P * 1e5, "w_4Q": rpm * RPM, "T_4Q": np.zeros(shape),
+                                   "Q_4Q": np.zeros(shape)})
+    capsys.readouterr()
+    assert main(["fit", str(tmp_path / "bad.mat"), *args[2:6], "--out", str(tmp_path / "r2"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "P_4Q" in err and "w_4Q" in err and "bad.mat" in err
+    assert not (tmp_path / "r2").exists()

@@ -137,14 +137,14 @@ class _FittedMotorid:
         self.owner = owner
 
     def predict(self, table) -> dict:
-        from motorid.identify.tables import bind_mechanisms, point_channels, table_samples
+        from motorid.identify.tables import angle_samples, bind_mechanisms, point_channels
 
         o = self.owner
         p = self.fit.ls.params_all
         disp = table.displacement if table.variable_displacement else None
         # the mechanisms as the fit used them (set for its training points), looked up at these points
-        ch = point_channels(p, o.spec, table_samples(o.spec, table), disp,
-                            bind_mechanisms(self.fit.ls.mechanisms, table))
+        mechanisms = bind_mechanisms(self.fit.ls.mechanisms, table)
+        ch = point_channels(p, o.spec, angle_samples(o.spec, table, mechanisms, p), disp, mechanisms)
         out = dict(zip(CHANNELS, (np.asarray(v) for v in ch)))
         ls = self.fit.ls
         # a channel whose parameters the training points did not identify is not predicted

@@ -67,11 +67,14 @@ class Polynomial(LossModel):
                 if ok.size < 2 * n_terms * (2 if split else 1):
                     continue
                 folds = np.array_split(rng.permutation(ok), 5)
+                A = self._basis(op, k, split)
                 sse = 0.0
                 for f in folds:
-                    tr = np.setdiff1d(ok, f)
-                    c = _lstsq(self._basis(op, k, split)[tr], target[tr])
-                    sse += float(np.sum((self._basis(op, k, split)[f] @ c - target[f]) ** 2))
+                    tr = np.zeros(len(target), bool)
+                    tr[ok] = True
+                    tr[f] = False
+                    c = _lstsq(A[tr], target[tr])
+                    sse += float(np.sum((A[f] @ c - target[f]) ** 2))
                 scores.append((sse, (k, split)))
             # the lowest degree within 1 % of the best held-out error (no extra terms for nothing)
             floor = min(s for s, _ in scores) if scores else 0.0

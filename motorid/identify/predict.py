@@ -108,22 +108,23 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
     for torque and flows, its prediction band (``_pi_lo95``, ``_pi_hi95``), the
     operating ``mode`` (motor / pump / none) and a ``note``.
     """
-    from motorid.identify.tables import bind_mechanisms, point_channels, table_samples
+    from motorid.identify.tables import angle_samples, bind_mechanisms, point_channels
 
     doc, spec, mechanisms = result if isinstance(result, tuple) else load_result(result, spec)
     params, names, cov, unidentified = fitted_parameters(doc, spec, mechanisms)
     mechanisms = bind_mechanisms(mechanisms, table)
-    samples = table_samples(spec, table)
+    samples = angle_samples(spec, table, mechanisms, params, names)
     disp = np.asarray(table.displacement, float)
     disp_arg = disp if table.variable_displacement else None
 
-    def outputs(p):
-        ch = point_channels(p, spec, samples, disp_arg, mechanisms)
+    def outputs_at(p, at):
+        ch = point_channels(p, spec, at, disp_arg, mechanisms)
         ev, ehm, e = efficiencies(ch.torque, ch.q_a, ch.q_b, jnp.asarray(table.speed), jnp.asarray(table.p_a),
                                   jnp.asarray(table.p_b), jnp.asarray(disp))
         return jnp.stack([ch.torque, ch.q_a, ch.q_b, ch.q_case, ev, ehm, e])
 
-    outputs = jax.jit(outputs)
+    outputs_at = jax.jit(outputs_at)
+    outputs = lambda p: outputs_at(p, samples)  # noqa: E731
     base = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
     value = np.asarray(outputs(base))
     var = np.zeros_like(value)
@@ -148,7 +149,10 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
             continue
         p2 = dict(base)
         p2[k] = base[k] * 2.0 + (0.1 if float(params[k]) == 0.0 else 0.0)
-        moved = np.any(np.abs(np.asarray(outputs(p2)) - value) > 1e-9 * (np.abs(value) + 1e-300), axis=1)
+        # where the model at p2 varies with θ (a K_L(θ) harmonic), its θ-average needs every angle
+        at = angle_samples(spec, table, mechanisms, p2)
+        ref = value if at.theta.shape == samples.theta.shape else np.asarray(outputs_at(base, at))
+        moved = np.any(np.abs(np.asarray(outputs_at(p2, at)) - ref) > 1e-9 * (np.abs(ref) + 1e-300), axis=1)
         for i in np.flatnonzero(moved & np.any(np.isfinite(value), axis=1)):
             blank[i] = True
             why.setdefault(_OUT[i][1], k)

@@ -84,12 +84,61 @@ def point_channels(params: dict, spec, samples, displacement=None, mechanisms: S
     displacement : per-point D [m³/rev] of a variable unit, or None (the spec's).
     Returns torque [N·m], q_a, q_b, q_case [m³/s], each over the points.
     """
+    ch = _angle_channels(params, spec, samples, displacement, mechanisms)
+    return Channels(*(jnp.mean(c, axis=-1) for c in ch))
+
+
+def _angle_channels(params: dict, spec, samples, displacement=None, mechanisms: Sequence = ()) -> Channels:
+    """The model's channels at each table point and each of its angles (before the θ-average)."""
     if displacement is not None:
         spec = dataclasses.replace(spec, displacement=jnp.asarray(displacement, dtype=jnp.float64)[:, None])
     for mech in mechanisms:  # conditions the table did not record (bind_mechanisms: to these points)
         samples = mech.table_conditions(params, spec, samples)
-    ch = model.predict(params, spec, samples, mechanisms)
-    return Channels(*(jnp.mean(c, axis=-1) for c in ch))
+    return model.predict(params, spec, samples, mechanisms)
+
+
+def angle_samples(spec, table, mechanisms: Sequence = (), params: dict | None = None, free: Sequence = ()):
+    """:func:`table_samples` with one angle where that is exact, the full K where it is not.
+
+    The θ-average of a model that does not vary with θ is its value at any one angle: the 1992
+    model with its K_L(θ) harmonics at 0 (a table cannot identify them) and every mechanism
+    without shaft-order terms.  Whether the model varies is probed at a few of the table's points,
+    at ``params`` (every parameter's value, SI) and along each parameter in ``free`` (a
+    derivative can vary with θ where the value does not: a harmonic at 0).  Memory and time of a
+    table fit then go with the points, not the points × K (a map of 50 000 points needed 5 GB)."""
+    if params is None or not len(table) or _varies_with_angle(spec, table, mechanisms, params, free):
+        return table_samples(spec, table)
+    return table_samples(spec, table, points=1)
+
+
+PROBE_POINTS = 12  # table points the θ-probe looks at, spread over the table
+
+
+def _varies_with_angle(spec, table, mechanisms, params, free, rtol: float = 1e-9) -> bool:
+    idx = np.unique(np.linspace(0, len(table) - 1, min(PROBE_POINTS, len(table))).round().astype(int))
+    sub = table.subset(idx)
+    samples = table_samples(spec, sub)
+    mechs = bind_mechanisms(mechanisms, sub)
+    disp = np.asarray(sub.displacement, dtype=float) if sub.variable_displacement else None
+    base = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items() if v is not None}
+    free = [k for k in free if k in base]
+
+    def per_angle(z):
+        p = dict(base)
+        for i, k in enumerate(free):
+            p[k] = base[k] + z[i]
+        return jnp.stack(_angle_channels(p, spec, samples, disp, mechs))  # (channel, point, angle)
+
+    z0 = jnp.zeros(len(free))
+    parts = [np.asarray(per_angle(z0))[..., None]]
+    if free:
+        parts.append(np.asarray(jax.jacfwd(per_angle)(z0)))  # (channel, point, angle, parameter)
+    for a in parts:
+        spread = np.ptp(a, axis=2)  # over the angles
+        size = np.max(np.abs(a), axis=(1, 2), keepdims=True)[:, :, 0]  # per channel (and parameter)
+        if not np.all(spread <= rtol * size):  # NaN counts as varying
+            return True
+    return False
 
 
 def bind_mechanisms(mechanisms: Sequence, table) -> tuple:
@@ -183,7 +232,8 @@ class _Residual:
         self.spec, self.free, self.held = spec, list(free), dict(held)
         self.mechanisms = bind_mechanisms(mechanisms, table) if table is not None else tuple(mechanisms)
         self.scales = np.asarray(scales, dtype=float)
-        self.samples = table_samples(spec, table) if table is not None else None
+        probe = {**held, **{k: float(v) for k, v in zip(free, scales)}}
+        self.samples = angle_samples(spec, table, self.mechanisms, probe, free) if table is not None else None
         disp = None
         if table is not None and table.variable_displacement:
             disp = np.asarray(table.displacement, dtype=float)

@@ -264,10 +264,23 @@ class ChannelMap:
         return names[number - 1]
 
     def _grid(self, source, file_label: str) -> dict:
-        """Gridded map: axis vectors × matrices → one entry per grid point (row-major, 'ij')."""
-        axes = [np.ravel(np.asarray(source.get(self.channels[a].name))) for a in self.grid_axes]
-        shape = tuple(a.size for a in axes)
-        mesh = np.meshgrid(*axes, indexing="ij")
+        """Gridded map: axis vectors × matrices → one entry per grid point (row-major, 'ij').
+
+        The axes may also be given as coordinate matrices of the outputs' shape (MATLAB's
+        ``meshgrid``/``ndgrid`` form: each cell's speed and pressure written out)."""
+        raw = [np.asarray(source.get(self.channels[a].name)) for a in self.grid_axes]
+        matrices = [np.squeeze(r).ndim == 2 for r in raw]
+        if any(matrices):
+            if not all(matrices) or np.squeeze(raw[0]).shape != np.squeeze(raw[1]).shape:
+                raise InputError(f"{file_label}: [grid] axes '{self.channels[self.grid_axes[0]].name}' "
+                                 f"{raw[0].shape} and '{self.channels[self.grid_axes[1]].name}' {raw[1].shape}: "
+                                 "give two vectors, or two coordinate matrices of one shape")
+            mesh = [np.squeeze(r) for r in raw]
+            shape = mesh[0].shape
+        else:
+            axes = [np.ravel(r) for r in raw]
+            shape = tuple(a.size for a in axes)
+            mesh = np.meshgrid(*axes, indexing="ij")
         out = {a: m.ravel() for a, m in zip(self.grid_axes, mesh)}
         for col, ch in self.channels.items():
             if col in self.grid_axes:

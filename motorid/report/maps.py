@@ -238,7 +238,7 @@ def rerender_map_report(out_dir, motor=None) -> Path:
 
     from motorid.errors import InputError
     from motorid.identify.predict import fitted_parameters, load_result
-    from motorid.identify.tables import bind_mechanisms, point_channels, table_samples
+    from motorid.identify.tables import angle_samples, bind_mechanisms, point_channels
     from motorid.io.spec import load_motor_spec
     from motorid.io.tables import read_tables, split_channel_map
 
@@ -254,9 +254,9 @@ def rerender_map_report(out_dir, motor=None) -> Path:
                          "through is not found")
     table = read_tables(paths, spec, channels=split_channel_map(channels)[0] if channels else None)
     params = fitted_parameters(doc, spec, mechanisms)[0]
-    ch = point_channels(params, spec, table_samples(spec, table),
-                        table.displacement if table.variable_displacement else None,
-                        bind_mechanisms(mechanisms, table))
+    mechanisms = bind_mechanisms(mechanisms, table)
+    ch = point_channels(params, spec, angle_samples(spec, table, mechanisms, params),
+                        table.displacement if table.variable_displacement else None, mechanisms)
     tf = SimpleNamespace(table=table, table_prediction=dict(zip(("torque", "q_a", "q_b", "q_case"),
                                                                 (np.asarray(c) for c in ch))))
     return write_map_report(out_dir, doc, tf, spec)

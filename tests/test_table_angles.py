@@ -1,0 +1,71 @@
+"""The θ-average of a table point with as few shaft angles as exact (identify/tables.py).
+
+A table point is the model averaged over a revolution.  Where the model does not vary with θ (the
+1992 model with its K_L(θ) harmonics at 0, which a table cannot identify, and any mechanism without
+shaft-order terms), one angle gives the average exactly; where it varies, in value or in a
+derivative along a fitted parameter, the full K angles are kept.  A map of 50 000 points needed
+5 GB and a minute with K = 64 angles; with one, a few hundred MB and seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from motorid.bench.maps import map_grid, simulate_map
+from motorid.identify.tables import angle_samples, bind_mechanisms, fit_table, point_channels, table_samples
+from motorid.io.spec import MotorSpec, OilSpec
+from motorid.physics import registry
+
+SPEC = MotorSpec("angles-45", 9, 45e-6, 0.003, oil=OilSpec(temp_C=50.0))
+TRUTH = {"Kv": 5000.0, "KF": 2e-3, "KFS": 1e-2, "TFc": 1.0, "Ks": 1.0, "KL0": 4e-14, "KL_a1": 0.0,
+         "KL_b1": 0.0, "KAB": 2e-14}
+
+
+def _table(tmp_path, params=TRUTH, mechanisms=()):
+    from motorid.io.tables import read_table
+
+    grid = map_grid([100, 600, 1500, 2500], [30, 120, 250], 4)
+    df = simulate_map(SPEC, params, grid, mechanisms=mechanisms, noise={
+        "torque_Nm": 0.05, "q_a_lpm": 0.02, "q_b_lpm": 0.02, "q_case_lpm": 0.01}, rng=np.random.default_rng(4))
+    df.to_csv(tmp_path / "map.csv", index=False)
+    return read_table(tmp_path / "map.csv", SPEC)
+
+
+def test_one_angle_where_the_model_is_angle_free_and_the_mean_is_the_same(tmp_path):
+    table = _table(tmp_path)
+    one = angle_samples(SPEC, table, (), TRUTH, ("Kv", "KF", "TFc", "KL0", "KAB"))
+    full = table_samples(SPEC, table)
+    assert one.theta.shape == (len(table), 1) and full.theta.shape[1] >= 64
+    a, b = point_channels(TRUTH, SPEC, one), point_channels(TRUTH, SPEC, full)
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-12, atol=1e-300)
+
+
+def test_every_angle_where_a_value_or_a_derivative_varies_with_it(tmp_path):
+    table = _table(tmp_path)
+    ripple = registry.get("misalignment_ripple")  # torque ripple at 1× and 2× shaft order
+    zero = {**TRUTH, **{k: 0.0 for k in ripple.parameters}}
+    assert angle_samples(SPEC, table, (ripple,), zero, ()).theta.shape[1] == 1  # held at 0: no ripple
+    # held at a value: the torque varies over the revolution
+    held = {**zero, "misalignment_ripple.A1": 0.5}
+    assert angle_samples(SPEC, table, (ripple,), held, ()).theta.shape[1] > 1
+    # fitted, from 0: its value does not vary, its derivative does
+    assert angle_samples(SPEC, table, (ripple,), zero, tuple(ripple.parameters)).theta.shape[1] > 1
+    # a mechanism with no θ in it keeps one angle
+    churn = registry.get("hydrodynamic_torque")
+    p = {**TRUTH, **{k: info.typical for k, info in churn.parameters.items()}}
+    assert angle_samples(SPEC, table, (churn,), p, tuple(churn.parameters)).theta.shape[1] == 1
+
+
+def test_a_fit_on_one_angle_equals_the_fit_on_every_angle(tmp_path, monkeypatch):
+    import motorid.identify.tables as tables
+
+    table = _table(tmp_path)
+    fast = fit_table(table, SPEC)
+    monkeypatch.setattr(tables, "angle_samples", lambda spec, table, *a, **k: table_samples(spec, table))
+    slow = fit_table(table, SPEC)
+    for k in ("Kv", "KF", "TFc", "KL0", "KAB"):
+        assert abs(fast.ls.params_all[k] - slow.ls.params_all[k]) <= 1e-7 * abs(slow.ls.params_all[k]), k
+        assert abs(fast.ls.std[k] - slow.ls.std[k]) <= 1e-6 * slow.ls.std[k], k
+    ch = point_channels(fast.ls.params_all, SPEC, table_samples(SPEC, table), None, bind_mechanisms((), table))
+    np.testing.assert_allclose(np.asarray(ch.torque), fast.table_prediction["torque"], rtol=1e-10)
