@@ -69,3 +69,37 @@ def test_a_fit_on_one_angle_equals_the_fit_on_every_angle(tmp_path, monkeypatch)
         assert abs(fast.ls.std[k] - slow.ls.std[k]) <= 1e-6 * slow.ls.std[k], k
     ch = point_channels(fast.ls.params_all, SPEC, table_samples(SPEC, table), None, bind_mechanisms((), table))
     np.testing.assert_allclose(np.asarray(ch.torque), fast.table_prediction["torque"], rtol=1e-10)
+
+
+def test_tables_of_one_size_class_run_one_compiled_residual(tmp_path):
+    """The table's points, the held values and the spec's numbers are inputs of the compiled
+    residual, not constants in it: two tables of other sizes (36 and 48 points, both padded to 64),
+    another motor's numbers, lower to the same program, and each fit gets its own answer."""
+    import dataclasses
+
+    from motorid.identify.tables import _Residual
+
+    from motorid.io.tables import read_table
+
+    def problem(spec, grid, truth, name):
+        df = simulate_map(spec, truth, grid, noise={"torque_Nm": 0.05, "q_a_lpm": 0.02},
+                          rng=np.random.default_rng(len(grid)))
+        df.to_csv(tmp_path / name, index=False)
+        table = read_table(tmp_path / name, spec)
+        names = ["Kv", "KF", "TFc", "KL0", "KAB", "KFS", "Ks", "KL_a1", "KL_b1"]
+        free = ["Kv", "KF", "TFc", "KL0", "KAB"]
+        held = {"KFS": 1e-2, "Ks": 1.0 + len(grid), "KL_a1": 0.0, "KL_b1": 0.0}
+        prob = _Residual(spec, table, names, free, held, [5e3, 2e-3, 1.0, 4e-14, 2e-14], ())
+        w = {c: np.ones(len(table)) for c in ("torque", "q_a", "q_b", "q_case")}
+        return prob, w
+
+    a, wa = problem(SPEC, map_grid([100, 600, 1500], [30, 120, 250], 4), TRUTH, "a.csv")
+    other = dataclasses.replace(SPEC, name="other", displacement=63e-6, inertia=0.01)
+    b, wb = problem(other, map_grid([100, 600, 1500, 2500], [30, 120, 250], 4), {**TRUTH, "Kv": 7000.0}, "b.csv")
+    assert a.n == 36 and b.n == 48 and len(a._pad(wa)["torque"]) == len(b._pad(wb)["torque"]) == 64
+    x = np.ones(5)
+    text = [p._residual.lower(x, p._pad(w), {}, p._data, p._held, p.spec).as_text() for p, w in ((a, wa), (b, wb))]
+    assert text[0] == text[1]
+    ra, rb = np.asarray(a.residual(x, wa, {})), np.asarray(b.residual(x, wb, {}))
+    assert ra.shape == rb.shape and not np.allclose(ra, rb)
+    assert len(a.table_pred(x)["torque"]) == 36  # the padding cut off

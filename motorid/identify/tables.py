@@ -33,7 +33,6 @@ K-fold refits reuse one compiled residual (held-out points get weight 0).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -48,103 +47,16 @@ from motorid import model
 from motorid.identify.identifiability import (coverage_reasons, one_back_pressure_warning, relative_spread,
                                               single_pressure_sum_reason, tfc_carries_kf_warning)
 from motorid.identify.results import operating_ranges
+from motorid.identify.table_model import (THETA_POINTS, angle_samples, bind_mechanisms,  # noqa: F401
+                                          point_channels, table_samples)
 from motorid.identify.types import FitResult
-from motorid.model import Channels
 
 TABLE_CHANNELS = ("torque", "q_a", "q_b", "q_case")
-THETA_POINTS = 64  # at least this many shaft angles over a revolution in the θ-average of a table point
 NO_BREAKAWAY = ("an operating-point table holds running points only, no breakaway: static friction needs "
                 "startability runs (ISO 4392-2)")
 NO_ANGLE = ("an operating-point table holds means over shaft angle: the K_L(θ) harmonics need flows "
             "recorded over shaft angle at low constant speed")
 
-
-# ----------------------------------------------------------------------------- the θ-averaged model
-
-
-def table_samples(spec, table, points: int | None = None):
-    """:class:`~motorid.model.Samples` of shape (points of the table, K angles over a revolution),
-    S(θ) set to its exact mean n/π (see the module's words)."""
-    if points is None:
-        points = max(THETA_POINTS, 2 * spec.pistons * (spec.leak_harmonics + 2))
-    theta = 2.0 * np.pi * (np.arange(points) + 0.5) / points
-    n = len(table)
-    col = lambda x: np.asarray(x, dtype=float)[:, None]  # noqa: E731
-    s = model.make_samples(spec, np.broadcast_to(theta, (n, points)).copy(), col(table.speed), col(table.p_a),
-                           col(table.p_b), col(table.p_case), col(table.viscosity), acceleration=0.0,
-                           direction=np.sign(col(table.speed)), temperature=col(table.temperature))
-    # S(θ)'s exact mean over a revolution (MODEL.md: mean torque DΔP/2π = (D/2n)·ΔP·S̄)
-    return s._replace(port_sum=np.full_like(s.port_sum, spec.pistons / np.pi))
-
-
-def point_channels(params: dict, spec, samples, displacement=None, mechanisms: Sequence = ()) -> Channels:
-    """The model's channels at each table point: :func:`motorid.model.predict` averaged over θ.
-
-    params : parameters (SI); samples : from :func:`table_samples`;
-    displacement : per-point D [m³/rev] of a variable unit, or None (the spec's).
-    Returns torque [N·m], q_a, q_b, q_case [m³/s], each over the points.
-    """
-    ch = _angle_channels(params, spec, samples, displacement, mechanisms)
-    return Channels(*(jnp.mean(c, axis=-1) for c in ch))
-
-
-def _angle_channels(params: dict, spec, samples, displacement=None, mechanisms: Sequence = ()) -> Channels:
-    """The model's channels at each table point and each of its angles (before the θ-average)."""
-    if displacement is not None:
-        spec = dataclasses.replace(spec, displacement=jnp.asarray(displacement, dtype=jnp.float64)[:, None])
-    for mech in mechanisms:  # conditions the table did not record (bind_mechanisms: to these points)
-        samples = mech.table_conditions(params, spec, samples)
-    return model.predict(params, spec, samples, mechanisms)
-
-
-def angle_samples(spec, table, mechanisms: Sequence = (), params: dict | None = None, free: Sequence = ()):
-    """:func:`table_samples` with one angle where that is exact, the full K where it is not.
-
-    The θ-average of a model that does not vary with θ is its value at any one angle: the 1992
-    model with its K_L(θ) harmonics at 0 (a table cannot identify them) and every mechanism
-    without shaft-order terms.  Whether the model varies is probed at a few of the table's points,
-    at ``params`` (every parameter's value, SI) and along each parameter in ``free`` (a
-    derivative can vary with θ where the value does not: a harmonic at 0).  Memory and time of a
-    table fit then go with the points, not the points × K (a map of 50 000 points needed 5 GB)."""
-    if params is None or not len(table) or _varies_with_angle(spec, table, mechanisms, params, free):
-        return table_samples(spec, table)
-    return table_samples(spec, table, points=1)
-
-
-PROBE_POINTS = 12  # table points the θ-probe looks at, spread over the table
-
-
-def _varies_with_angle(spec, table, mechanisms, params, free, rtol: float = 1e-9) -> bool:
-    idx = np.unique(np.linspace(0, len(table) - 1, min(PROBE_POINTS, len(table))).round().astype(int))
-    sub = table.subset(idx)
-    samples = table_samples(spec, sub)
-    mechs = bind_mechanisms(mechanisms, sub)
-    disp = np.asarray(sub.displacement, dtype=float) if sub.variable_displacement else None
-    base = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items() if v is not None}
-    free = [k for k in free if k in base]
-
-    def per_angle(z):
-        p = dict(base)
-        for i, k in enumerate(free):
-            p[k] = base[k] + z[i]
-        return jnp.stack(_angle_channels(p, spec, samples, disp, mechs))  # (channel, point, angle)
-
-    z0 = jnp.zeros(len(free))
-    parts = [np.asarray(per_angle(z0))[..., None]]
-    if free:
-        parts.append(np.asarray(jax.jacfwd(per_angle)(z0)))  # (channel, point, angle, parameter)
-    for a in parts:
-        spread = np.ptp(a, axis=2)  # over the angles
-        size = np.max(np.abs(a), axis=(1, 2), keepdims=True)[:, :, 0]  # per channel (and parameter)
-        if not np.all(spread <= rtol * size):  # NaN counts as varying
-            return True
-    return False
-
-
-def bind_mechanisms(mechanisms: Sequence, table) -> tuple:
-    """``mechanisms`` with those that belong to a table's points (``bound_to``, e.g. an oil
-    temperature per recording) bound to the points of ``table``."""
-    return tuple(m.bound_to(table) for m in mechanisms)
 
 
 # ----------------------------------------------------------------------------- what a table identifies
@@ -222,23 +134,36 @@ class TableFit:
     table_noise_floor: dict = field(default_factory=dict)  # channel → σ_floor,c [SI] where the table weights points
 
 
+def _padded(table):
+    """``table`` with its last point repeated up to a power of two (at least 16) points: the
+    compiled residual then serves every table of that size class (the extra points get weight 0)."""
+    n = len(table)
+    size = max(16, 1 << max(n - 1, 1).bit_length())
+    return table if size == n else table.subset(np.concatenate([np.arange(n), np.full(size - n, n - 1)]))
+
+
 class _Residual:
     """The weighted residual of tables (and logs) as a function of the scaled free parameters.
 
     One compiled function per set of free parameters; the weights are arguments, so that
-    refits on other folds or with other noise levels reuse it."""
+    refits on other folds or with other noise levels reuse it.  So are the table's points (padded
+    to a power of two with points of weight 0), the held values and the spec's numbers: the
+    program is not this table's, and any table of the same size class, mechanisms and free
+    parameters runs it (from the disk cache in a later process)."""
 
     def __init__(self, spec, table, names, free, held, scales, mechanisms, dataset=None):
         self.spec, self.free, self.held = spec, list(free), dict(held)
-        self.mechanisms = bind_mechanisms(mechanisms, table) if table is not None else tuple(mechanisms)
+        self.n = len(table) if table is not None else 0
+        padded = _padded(table) if table is not None else None
+        self.mechanisms = bind_mechanisms(mechanisms, padded) if table is not None else tuple(mechanisms)
         self.scales = np.asarray(scales, dtype=float)
         probe = {**held, **{k: float(v) for k, v in zip(free, scales)}}
-        self.samples = angle_samples(spec, table, self.mechanisms, probe, free) if table is not None else None
+        self.samples = angle_samples(spec, padded, self.mechanisms, probe, free) if table is not None else None
         disp = None
         if table is not None and table.variable_displacement:
-            disp = np.asarray(table.displacement, dtype=float)
+            disp = np.asarray(padded.displacement, dtype=float)
         self.disp = disp
-        self.obs = {c: np.nan_to_num(np.asarray(table.measured[c], dtype=float)) for c in TABLE_CHANNELS} \
+        self.obs = {c: np.nan_to_num(np.asarray(padded.measured[c], dtype=float)) for c in TABLE_CHANNELS} \
             if table is not None else {}
         self.dataset = dataset
         self.log_obs = {}
@@ -248,42 +173,63 @@ class _Residual:
                                      for c in TABLE_CHANNELS})
             if dataset.n_events:
                 self.log_obs["breakaway"] = np.nan_to_num(np.asarray(dataset.held_torque, dtype=float))
+        mechs = self.mechanisms
+        scales_j = jnp.asarray(self.scales)
 
-        def params(x):
-            p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()}
+        def params(x, held_values):
+            p = dict(held_values)
             for i, k in enumerate(self.free):
-                p[k] = x[i] * self.scales[i]
+                p[k] = x[i] * scales_j[i]
             return p
 
-        def table_pred(x):
-            ch = point_channels(params(x), spec, self.samples, self.disp, self.mechanisms)
+        def table_pred(x, data, held_values, spec_):
+            samples, _, disp_ = data
+            ch = point_channels(params(x, held_values), spec_, samples, disp_, mechs)
             return dict(zip(TABLE_CHANNELS, ch))
 
-        def log_pred(x):
+        def log_pred(x, held_values, spec_):
             out = {}
-            p = params(x)
+            p = params(x, held_values)
             if dataset is not None and dataset.n_running:
-                ch = model.predict(p, spec, dataset.running, self.mechanisms)
+                ch = model.predict(p, spec_, dataset.running, mechs)
                 out.update(zip(TABLE_CHANNELS, ch))
             if dataset is not None and dataset.n_events:
-                out["breakaway"] = model.predict_breakaway(p, spec, dataset.events, self.mechanisms)
+                out["breakaway"] = model.predict_breakaway(p, spec_, dataset.events, mechs)
             return out
 
-        def residual(x, w_table, w_logs):
+        def residual(x, w_table, w_logs, data, held_values, spec_):
             parts = []
             if table is not None:
-                pred = table_pred(x)
-                parts += [(self.obs[c] - pred[c]) * w_table[c] for c in TABLE_CHANNELS]
+                pred = table_pred(x, data, held_values, spec_)
+                parts += [(data[1][c] - pred[c]) * w_table[c] for c in TABLE_CHANNELS]
             if self.log_obs:
-                pred = log_pred(x)
+                pred = log_pred(x, held_values, spec_)
                 parts += [(self.log_obs[c] - pred[c]) * w_logs[c] for c in self.log_obs]
             return jnp.concatenate(parts)
 
-        self.params = params
-        self.log_pred = jax.jit(log_pred)
-        self.table_pred = jax.jit(table_pred) if table is not None else None
-        self.residual = jax.jit(residual)
-        self.jacobian = jax.jit(jax.jacfwd(residual))
+        self._data = (self.samples, self.obs, self.disp)
+        self._held = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()}
+        self._log_pred = jax.jit(log_pred)
+        self._table_pred = jax.jit(table_pred) if table is not None else None
+        self._residual = jax.jit(residual)
+        self._jacobian = jax.jit(jax.jacfwd(residual))
+
+    def _pad(self, w_table):
+        extra = len(self.obs["torque"]) - self.n if self.obs else 0
+        return {c: np.concatenate([np.asarray(w, dtype=float), np.zeros(extra)]) for c, w in w_table.items()}
+
+    def log_pred(self, x):
+        return self._log_pred(x, self._held, self.spec)
+
+    def table_pred(self, x):
+        """The θ-averaged model at the table's points (its own n, the padding cut off)."""
+        return {c: v[: self.n] for c, v in self._table_pred(x, self._data, self._held, self.spec).items()}
+
+    def residual(self, x, w_table, w_logs):
+        return self._residual(x, self._pad(w_table), w_logs, self._data, self._held, self.spec)
+
+    def jacobian(self, x, w_table, w_logs):
+        return self._jacobian(x, self._pad(w_table), w_logs, self._data, self._held, self.spec)
 
     def solve(self, x0, w_table, w_logs, lower):
         from scipy.optimize import least_squares
