@@ -103,3 +103,18 @@ def test_tables_of_one_size_class_run_one_compiled_residual(tmp_path):
     ra, rb = np.asarray(a.residual(x, wa, {})), np.asarray(b.residual(x, wb, {}))
     assert ra.shape == rb.shape and not np.allclose(ra, rb)
     assert len(a.table_pred(x)["torque"]) == 36  # the padding cut off
+
+
+def test_a_sensor_lag_leaves_every_table_point_as_it_was_and_is_not_tried_there(tmp_path):
+    """A first-order lag flattens and delays the ripple over shaft angle; its mean over a revolution,
+    all a steady point holds, is the unlagged one. Diagnose says so instead of fitting it (every angle,
+    a τ that no table point can show)."""
+    table = _table(tmp_path)
+    full = table_samples(SPEC, table)
+    without = point_channels(TRUTH, SPEC, full)
+    for ch in ("torque", "q_a", "q_b", "q_case"):
+        lag = registry.get(f"sensor_lag_{ch}")
+        assert "mean untouched" in lag.unseen_in_table(table)
+        lagged = point_channels({**TRUTH, f"sensor_lag_{ch}.tau": 5e-3}, SPEC, full, None, (lag,))
+        for a, b in zip(lagged, without):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-9 * np.max(np.abs(b)))

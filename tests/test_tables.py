@@ -397,6 +397,8 @@ def test_diagnose_on_a_table_names_the_missing_physics(tmp_path):
     cands = [get("turbulent_leakage"), hydro, get("misalignment_ripple")]
     dg = diagnose_table(table, SPEC, candidates=cands, max_mechanisms=2)
     assert [m.id for m in dg["mechanisms"]] == ["hydrodynamic_torque"]
+    skipped = {s["id"]: s["skipped"] for s in dg["steps"] if "skipped" in s}
+    assert "averages to zero" in skipped["misalignment_ripple"]  # said why, not fitted to find it out
     ls = dg["fit"].ls
     k = "hydrodynamic_torque.C_h"
     assert abs(ls.values[k] - 1e-4) < 3 * ls.std[k]

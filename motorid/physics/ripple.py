@@ -50,6 +50,11 @@ class MisalignmentRipple(CatalogMechanism):
              + self.param(params, "A2") * jnp.cos(2.0 * th) + self.param(params, "B2") * jnp.sin(2.0 * th))
         return ch._replace(torque=ch.torque + t)
 
+    def unseen_in_table(self, table) -> str | None:
+        """Mean zero over a revolution: nothing of it is left in a steady table's point."""
+        return ("a table's points are means over shaft angle, and a ripple at 1× and 2× shaft order averages "
+                "to zero over a revolution")
+
     def describe(self, values, spec=None) -> str:
         a1, b1, a2, b2 = (self.value(values, k) for k in ("A1", "B1", "A2", "B2"))
         parts = []

@@ -325,6 +325,13 @@ class SensorLag(CatalogMechanism):
     def neutral(self) -> dict:
         return {f"{self.id}.tau": 0.0}
 
+    def unseen_in_table(self, table) -> str | None:
+        """A lag changes the ripple over shaft angle, not a reading's mean over a revolution, which is
+        all a steady table's point holds: diagnose does not try it there."""
+        return (f"a table's points are means over shaft angle, and a first-order lag of the "
+                f"{_METER_WORDS[self.channel]} leaves a reading's mean untouched: it shows in the ripple over "
+                "shaft angle only")
+
     def describe(self, values, spec=None) -> str:
         tau = self.value(values, "tau")
         word = _METER_WORDS[self.channel]
