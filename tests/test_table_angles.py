@@ -118,3 +118,18 @@ def test_a_sensor_lag_leaves_every_table_point_as_it_was_and_is_not_tried_there(
         lagged = point_channels({**TRUTH, f"sensor_lag_{ch}.tau": 5e-3}, SPEC, full, None, (lag,))
         for a, b in zip(lagged, without):
             np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-9 * np.max(np.abs(b)))
+
+
+def test_the_probe_looks_where_a_theta_term_is_largest(tmp_path):
+    """A θ-term can be zero at most points (a lag's change scales with the speed and the pressures):
+    a table of 40 points at rest and one running point between the evenly spread probe points still
+    gets every angle where a held lag varies there."""
+    from motorid.io.tables import read_table
+
+    grid = np.zeros((41, 3))
+    grid[20] = (1500.0, 200.0, 0.0)  # rpm, bar, bar: not one of the 12 evenly spread points of 41
+    simulate_map(SPEC, TRUTH, grid).to_csv(tmp_path / "rest.csv", index=False)
+    table = read_table(tmp_path / "rest.csv", SPEC)
+    lag = registry.get("sensor_lag_q_a")
+    assert angle_samples(SPEC, table, (lag,), {**TRUTH, "sensor_lag_q_a.tau": 5e-3}, ()).theta.shape[1] > 1
+    assert angle_samples(SPEC, table, (lag,), {**TRUTH, "sensor_lag_q_a.tau": 0.0}, ()).theta.shape[1] == 1

@@ -67,16 +67,28 @@ def angle_samples(spec, table, mechanisms: Sequence = (), params: dict | None = 
     at ``params`` (every parameter's value, SI) and along each parameter in ``free`` (a
     derivative can vary with θ where the value does not: a harmonic at 0).  Memory and time of a
     table fit then go with the points, not the points × K (a map of 50 000 points needed 5 GB)."""
+    return table_samples(spec, table, angle_points(spec, table, mechanisms, params, free))
+
+
+def angle_points(spec, table, mechanisms: Sequence = (), params: dict | None = None, free: Sequence = ()):
+    """1 where the probe of :func:`angle_samples` shows the model θ-free at ``table``'s points, else
+    None (every angle, :func:`table_samples`' K)."""
     if params is None or not len(table) or _varies_with_angle(spec, table, mechanisms, params, free):
-        return table_samples(spec, table)
-    return table_samples(spec, table, points=1)
+        return None
+    return 1
 
 
 PROBE_POINTS = 12  # table points the θ-probe looks at, spread over the table
 
 
 def _varies_with_angle(spec, table, mechanisms, params, free, rtol: float = 1e-9) -> bool:
-    idx = np.unique(np.linspace(0, len(table) - 1, min(PROBE_POINTS, len(table))).round().astype(int))
+    # points spread over the table, and those where a θ-term is largest (it scales with the speed, the
+    # port pressures above the case and the pressure difference: zero at rest or at the case's pressure)
+    spread = np.linspace(0, len(table) - 1, min(PROBE_POINTS, len(table))).round().astype(int)
+    p_a, p_b, p_c = (np.asarray(x, dtype=float) for x in (table.p_a, table.p_b, table.p_case))
+    extremes = [int(np.nanargmax(np.abs(np.asarray(x, dtype=float))))
+                for x in (table.speed, p_a - p_c, p_b - p_c, p_a - p_b)]
+    idx = np.unique(np.concatenate([spread, extremes]))
     sub = table.subset(idx)
     samples = table_samples(spec, sub)
     mechs = bind_mechanisms(mechanisms, sub)

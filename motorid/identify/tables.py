@@ -47,8 +47,8 @@ from motorid import model
 from motorid.identify.identifiability import (coverage_reasons, one_back_pressure_warning, relative_spread,
                                               single_pressure_sum_reason, tfc_carries_kf_warning)
 from motorid.identify.results import operating_ranges
-from motorid.identify.table_model import (THETA_POINTS, angle_samples, bind_mechanisms,  # noqa: F401
-                                          point_channels, table_samples)
+from motorid.identify.table_model import (THETA_POINTS, angle_points, angle_samples,  # noqa: F401
+                                          bind_mechanisms, point_channels, table_samples)
 from motorid.identify.types import FitResult
 
 TABLE_CHANNELS = ("torque", "q_a", "q_b", "q_case")
@@ -138,6 +138,8 @@ def _padded(table):
     """``table`` with its last point repeated up to a power of two (at least 16) points: the
     compiled residual then serves every table of that size class (the extra points get weight 0)."""
     n = len(table)
+    if n == 0:
+        return table
     size = max(16, 1 << max(n - 1, 1).bit_length())
     return table if size == n else table.subset(np.concatenate([np.arange(n), np.full(size - n, n - 1)]))
 
@@ -158,7 +160,9 @@ class _Residual:
         self.mechanisms = bind_mechanisms(mechanisms, padded) if table is not None else tuple(mechanisms)
         self.scales = np.asarray(scales, dtype=float)
         probe = {**held, **{k: float(v) for k, v in zip(free, scales)}}
-        self.samples = angle_samples(spec, padded, self.mechanisms, probe, free) if table is not None else None
+        # probed on the table's own points (not the padding's repeats), evaluated on the padded table
+        self.samples = table_samples(spec, padded, angle_points(spec, table, mechanisms, probe, free)) \
+            if table is not None else None
         disp = None
         if table is not None and table.variable_displacement:
             disp = np.asarray(padded.displacement, dtype=float)
@@ -213,6 +217,11 @@ class _Residual:
         self._table_pred = jax.jit(table_pred) if table is not None else None
         self._residual = jax.jit(residual)
         self._jacobian = jax.jit(jax.jacfwd(residual))
+
+    def hold(self, held: dict):
+        """Hold these values (same names) from now on."""
+        self.held = dict(held)
+        self._held = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()}
 
     def _pad(self, w_table):
         extra = len(self.obs["torque"]) - self.n if self.obs else 0
@@ -386,10 +395,12 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     def problem(free_now):
         key = (tuple(free_now), id(table), id(dataset),  # a fold's own recordings: its own problem
                tuple((getattr(m, 'fitted', None), getattr(m, 'implied', None)) for m in mechanisms))
+        held = {k: float(start.get(k, 0.0) or 0.0) for k in names if k not in free_now}
         if key not in cache:
-            held = {k: float(start.get(k, 0.0) or 0.0) for k in names if k not in free_now}
             scales = [abs(model.parameter_info(k, mechanisms).typical) or 1.0 for k in free_now]
             cache[key] = _Residual(spec, table, names, free_now, held, scales, mechanisms, dataset)
+        else:  # a refit on another fold: its own start values for what it holds (inputs of the program)
+            cache[key].hold(held)
         return cache[key]
 
     floor_c = {c: 0.0 for c in TABLE_CHANNELS}  # σ_floor,c: set where the table weights its points
@@ -530,7 +541,8 @@ def table_document(tf: TableFit) -> dict:
         "files": sorted(set(map(str, t.file))),
         "channels": t.channels(),
         "theta_average": "model.predict averaged over a revolution: S(θ) at its exact mean n/π, the rest over "
-                         "K ≥ 64 evenly spread shaft angles (exact for trigonometric terms of order < K)",
+                         "K ≥ 64 evenly spread shaft angles (exact for trigonometric terms of order < K), or at one "
+                         "angle where nothing in the model varies with θ (probed)",
         "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s",
                       **({"floor": tf.table_noise_floor[c]} if c in tf.table_noise_floor else {})}
                   for c, v in tf.table_noise.items()},
