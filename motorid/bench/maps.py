@@ -52,8 +52,8 @@ def simulate_map(spec, params: dict, grid, temp_C: float = 50.0, mechanisms=(), 
                    {c: nan for c in ("torque", "q_a", "q_b", "q_case")},
                    {c: np.ones(n) for c in ("torque", "q_a", "q_b", "q_case")}, np.array(["sim"] * n, dtype=object),
                    np.arange(n), True, {}, displacement_cm3 is not None)
-    ch = point_channels(params, spec, angle_samples(spec, t, mechanisms, params), disp if displacement_cm3 is not None else None,
-                        mechanisms)
+    ch = point_channels(params, spec, angle_samples(spec, t, mechanisms, params),
+                        disp if displacement_cm3 is not None else None, mechanisms)
     out = pd.DataFrame({"point_id": t.point_id, "speed_rpm": grid[:, 0], "p_a_bar": grid[:, 1],
                         "p_b_bar": grid[:, 2], "p_case_bar": p_case_bar, "oil_temp_C": temp_C})
     if displacement_cm3 is not None:

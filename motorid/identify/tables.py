@@ -154,7 +154,8 @@ class _Residual:
     parameters runs it (from the disk cache in a later process)."""
 
     def __init__(self, spec, table, names, free, held, scales, mechanisms, dataset=None):
-        self.spec, self.free, self.held = spec, list(free), dict(held)
+        self.spec, self.free = spec, list(free)
+        self.hold(held)
         self.n = len(table) if table is not None else 0
         padded = _padded(table) if table is not None else None
         self.mechanisms = bind_mechanisms(mechanisms, padded) if table is not None else tuple(mechanisms)
@@ -212,14 +213,13 @@ class _Residual:
             return jnp.concatenate(parts)
 
         self._data = (self.samples, self.obs, self.disp)
-        self._held = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()}
         self._log_pred = jax.jit(log_pred)
         self._table_pred = jax.jit(table_pred) if table is not None else None
         self._residual = jax.jit(residual)
         self._jacobian = jax.jit(jax.jacfwd(residual))
 
     def hold(self, held: dict):
-        """Hold these values (same names) from now on."""
+        """Hold these values (SI; the same names on a refit) from now on: inputs of the programs."""
         self.held = dict(held)
         self._held = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()}
 
