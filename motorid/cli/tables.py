@@ -5,14 +5,9 @@ The commands in cli/fit.py and cli/diagnose.py hand over here when any given fil
 
 from __future__ import annotations
 
-import math
-import time
 from pathlib import Path
 
-import numpy as np
-
 from motorid.errors import InputError
-
 from motorid.discrepancy.tables import diagnose_tables, diagnosis_table_document
 from motorid.identify.table_pipeline import identify_tables, table_inputs, table_result_document
 
@@ -142,6 +137,8 @@ def run_table_diagnose(args, logs, tables, spec) -> int:
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(doc, out / "diagnosis.json")
     drop_stale_points(out, getattr(args, "log_points", None))
+    if doc["selection"].get("points_note"):
+        print(doc["selection"]["points_note"])
     if not doc["mismatch"]:
         print("no mechanism earns its place on the table (ΔBIC below --min-evidence)")
     for m in doc["mechanisms"]:

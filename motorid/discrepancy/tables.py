@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 import math
-import time
-from pathlib import Path
 
 import numpy as np
 
-from motorid.errors import InputError
 
 
 def _profile_bic(tf) -> float:
@@ -58,6 +55,48 @@ def held_out_gains(table, spec, current: list, mech) -> dict:
             if c in after and before[c]["rms"] and after[c]["rms"] is not None}
 
 
+#: on a table of more points than this, diagnose chooses the mechanisms on this many of them, spread over
+#: the operating range (:func:`selection_points`), then fits and compares the chosen model on every point.
+#: A grid of 50 927 interpolated points (the A6VM map of docs/maps.md) takes a full fit per candidate per
+#: round otherwise (over 20 min); its mechanisms are as plain on 2 000 of them.
+SELECTION_POINTS = 2000
+
+
+def selection_points(table, n: int | None = None) -> np.ndarray | None:
+    """Indices of at most ``n`` of ``table``'s points spread evenly over its operating range, or None where
+    it has no more than ``n``.
+
+    The range (signed speed, signed ΔP, and where they vary the case pressure, log viscosity and
+    displacement, each scaled to [0, 1]) is cut into equal cells, as many per recording as ``n`` allows;
+    each occupied cell gives its point nearest the cell's centre.  Every recording keeps its share (a
+    per-recording temperature stays identifiable); nothing random: the same table gives the same points."""
+    n = SELECTION_POINTS if n is None else int(n)
+    N = len(table)
+    if N <= n:
+        return None
+    cols = [np.asarray(table.speed, float), np.asarray(table.dp, float)]
+    for extra in (np.asarray(table.p_case, float), np.log(np.asarray(table.viscosity, float)),
+                  np.asarray(table.displacement, float)):
+        if np.ptp(extra[np.isfinite(extra)]) > 1e-9 * max(np.max(np.abs(extra[np.isfinite(extra)])), 1e-300):
+            cols.append(extra)
+    X = np.column_stack(cols)
+    X = np.where(np.isfinite(X), X, np.nanmedian(X, axis=0))
+    span = np.ptp(X, axis=0)
+    X = (X - X.min(axis=0)) / np.where(span > 0, span, 1.0)
+    _, group = np.unique(table.recordings().astype(str), return_inverse=True)
+    per_group = n / (group.max() + 1)
+    # bins along each axis: the largest count whose cells number at most per_group (at least 2)
+    bins = max(2, int(np.floor(per_group ** (1.0 / X.shape[1]) + 1e-9)))
+    cell = np.minimum(np.floor(X * bins), bins - 1)
+    distance = np.sum((X * bins - cell - 0.5) ** 2, axis=1)
+    key = np.column_stack([group, cell]).astype(np.int64)
+    order = np.lexsort((distance,) + tuple(key.T[::-1]))
+    first = np.ones(N, bool)
+    first[1:] = np.any(key[order][1:] != key[order][:-1], axis=1)
+    chosen = np.sort(order[first])
+    return chosen if chosen.size < N else None
+
+
 def _abs_dp(table, dataset) -> np.ndarray:
     """|ΔP| [Pa] of the table's points and of the logs' running samples (a joint fit)."""
     out = [np.abs(np.asarray(table.dp, dtype=float))]
@@ -87,13 +126,21 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             cands.append(per_recording)
     current = []
     joint = dict(dataset=dataset, log_fit=log_fit)
+    alone = dataset is None or not dataset.n_running
+    chosen = selection_points(table) if alone else None
+    every = table  # where the chosen model is fitted and compared
+    if chosen is not None:
+        table = table.subset(chosen)
+        if progress:
+            progress(f"mechanisms chosen on {len(table)} of the {len(every)} points, spread over the operating "
+                     "range; the model then fitted on every point")
     fit0 = fit_table(table, spec, **joint)
     bic = _profile_bic(fit0)
     base_fit = best_fit = fit0
     steps = []
-    if dataset is None or not dataset.n_running:  # the points alone: what they cannot tell from what it mimics
+    if alone:  # the points alone: what they cannot tell from what it mimics
         for mech in list(cands):
-            why = mech.unseen_in_table(table)
+            why = mech.unseen_in_table(every)
             if why is not None:
                 cands.remove(mech)
                 steps.append({"id": mech.id, "skipped": why})
@@ -133,6 +180,11 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
                          + ", ".join(f"{100 * g:.0f} % of the {c} error" for c, g in gains.items()))
         current.append(mech)
         bic, best_fit = b, tf
+    selection = {"points": len(table), "of": len(every)}
+    if chosen is not None:  # the chosen model (and the base one) on every point
+        table = every
+        base_fit = fit_table(table, spec)
+        best_fit = fit_table(table, spec, current) if current else base_fit
     from motorid.discrepancy.table_terms import MotoridWithTerms, unexplained_table_entries
 
     unexplained = unexplained_table_entries(best_fit, spec)  # on the table's points, logs or not
@@ -143,7 +195,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
                                  + " + empirical term")
     comparison = compare(table, spec, mechanisms=current, motorid_model=model) if len(table) >= 10 else None
     return {"mechanisms": current, "fit": best_fit, "base_fit": base_fit, "steps": steps, "comparison": comparison,
-            "unexplained": unexplained}
+            "unexplained": unexplained, "selection_points": selection}
 
 
 def diagnose_tables(log_paths, table_paths, spec, min_evidence: float = 10.0, progress=None, channels=None) -> dict:
@@ -164,6 +216,18 @@ def diagnose_tables(log_paths, table_paths, spec, min_evidence: float = 10.0, pr
         log_fit = fit_least_squares(dataset, spec)
     return diagnose_table(table, spec, min_evidence=min_evidence, dataset=dataset, log_fit=log_fit,
                           progress=progress)
+
+
+def _selection_words(sel) -> dict:
+    """The selection's points in result.json: how many, of how many, in words where a share."""
+    if not sel:
+        return {}
+    out = {"points": sel["points"], "of_points": sel["of"]}
+    if sel["points"] < sel["of"]:
+        out["points_note"] = (f"mechanisms chosen on {sel['points']} of the table's {sel['of']} points, one per cell "
+                              "of an even grid over the operating range; the chosen model fitted and compared on "
+                              "every point")
+    return out
 
 
 def diagnosis_table_document(dg: dict, spec) -> dict:
@@ -196,7 +260,8 @@ def diagnosis_table_document(dg: dict, spec) -> dict:
                         "residual_rms_after": float(np.sqrt(np.nanmean(r1**2)))}
     return _clean({"source": "operating-point tables", "mismatch": bool(dg["mechanisms"] or dg.get("unexplained")),
                    "mechanisms": mechs, "unexplained": dg.get("unexplained", []),
-                   "selection": {"criterion": "BIC with each channel's noise level profiled out", "steps": dg["steps"]},
+                   "selection": {"criterion": "BIC with each channel's noise level profiled out", "steps": dg["steps"],
+                                 **_selection_words(dg.get("selection_points"))},
                    "channels": chans, "comparison": dg["comparison"],
                    "parameters": {k: {"value": fit.ls.values[k], "std": fit.ls.std[k],
                                       "identifiable": fit.ls.identifiable[k],
