@@ -401,3 +401,33 @@ def test_a_workbook_with_a_sheet_per_temperature_reads_in_one_go(made):
 def _csv(d, df):
     df.to_csv(d / "map.csv", index=False)
     return d / "map.csv"
+
+
+def test_the_efficiency_maps_of_a_dense_grid_show_their_colours(tmp_path):
+    """A dense map (24 000 points, as a lab's meshgrid file holds tens of thousands): the points are
+    not marked (their markers covered every colour: 44 % of the picture was black)."""
+    import base64
+    import io
+    import re
+
+    from PIL import Image
+
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.identify.tables import fit_table
+    from motorid.io.tables import read_table
+    from motorid.model import MotorSpec, OilSpec
+    from motorid.report.maps import plot_efficiency_maps
+
+    spec = MotorSpec("dense", 9, 80e-6, 0.005, oil=OilSpec(temp_C=50.0))
+    truth = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.0,
+             "KL_b1": 0.0, "KAB": 2e-14}
+    grid = map_grid(np.linspace(50, 3000, 100), np.linspace(5, 300, 60), 4)
+    df = simulate_map(spec, truth, grid, noise={"torque_Nm": 0.3, "q_a_lpm": 0.05, "q_b_lpm": 0.05,
+                                                "q_case_lpm": 0.02}, rng=np.random.default_rng(3))
+    df.to_csv(tmp_path / "dense.csv", index=False)
+    t = read_table(tmp_path / "dense.csv", spec)
+    plot = plot_efficiency_maps(t, fit_table(t, spec).table_prediction)
+    png = base64.b64decode(re.search(r'base64,([^"]+)"', plot.img).group(1))
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+    dark = np.all(rgb < 40, axis=2).mean()
+    assert dark < 0.10, f"{dark:.0%} of the picture is black"

@@ -20,6 +20,8 @@ import numpy as np
 
 BAR, RPM = 1e5, 2 * np.pi / 60
 ROWS = (("volumetric", "η_v"), ("hydromechanical", "η_hm"), ("overall", "η"))
+#: the measured points are marked on the maps where there are at most this many
+MARKED_POINTS = 600
 
 
 def _esc(x) -> str:
@@ -66,7 +68,9 @@ def plot_efficiency_maps(table, predicted: dict):
         hi = float(np.nanpercentile(np.r_[meas[k][ok], pred[k][ok]], 98))
         levels = np.linspace(lo, hi, 12) if hi > lo else None
         res = meas[k][ok] - pred[k][ok]
-        lim = float(np.nanmax(np.abs(res))) or 1e-12
+        # the residual's colour scale: 98 % of the points inside it (an efficiency near ΔP = 0 or
+        # ω = 0 is a ratio of small numbers; its few wild values would wash out every other colour)
+        lim = float(np.nanpercentile(np.abs(res), 98)) or float(np.nanmax(np.abs(res))) or 1e-12
         for c, (vals, title, cmap, lev) in enumerate((
                 (meas[k][ok], f"{sym} measured", "viridis", levels),
                 (pred[k][ok], f"{sym} predicted", "viridis", levels),
@@ -80,10 +84,11 @@ def plot_efficiency_maps(table, predicted: dict):
             except ValueError:  # all triangles masked, or none (points on a line): the points, coloured
                 sc = ax.scatter(x[ok], y[ok], c=vals, cmap=cmap, s=12)
                 fig.colorbar(sc, ax=ax, shrink=0.85)
-            ax.plot(x[ok], y[ok], ".", color="k", ms=2)
+            if ok.sum() <= MARKED_POINTS:  # a dense grid's markers would cover the colours
+                ax.plot(x[ok], y[ok], ".", color="k", ms=2)
             ax.axhline(0, color="k", lw=0.6)
             ax.axvline(0, color="k", lw=0.6)
-            ax.set_title(title)
+            ax.set_title(title if ok.sum() <= MARKED_POINTS else f"{title} ({ok.sum():,} points)")
             ax.set_xlabel("ΔP = P_A − P_B [bar]")
             ax.set_ylabel("speed [rpm]")
         facts[k] = {"rms_residual": float(np.sqrt(np.mean(res**2))), "points": int(ok.sum())}
