@@ -268,3 +268,58 @@ def test_unknown_primitive_is_refused_by_name():
     jaxpr = jax.make_jaxpr(lambda x: jnp.sum(jnp.cumsum(jnp.ones(3) * x)))(1.0)
     with pytest.raises(UnsupportedPrimitive, match="cumsum"):
         emit_c_function(jaxpr)
+
+
+def test_a_map_fit_exports_its_losses_and_asks_for_the_static_friction_it_lacks(tmp_path, capsys):
+    """A loss map holds no breakaway: K_FS and K_s have no value.  The Simscape tables never use them
+    (byte for byte the same whatever is assumed), and the K_L harmonics the fit held at 0 are 0; an
+    export that does use them (the Python module's breakaway torque, the FMU's) asks for them by name,
+    writes nothing, and takes them with --assume."""
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.cli import main
+    from motorid.model import MotorSpec, OilSpec
+
+    spec = MotorSpec("map-9", 9, 80e-6, 0.005, oil=OilSpec(temp_C=50.0))
+    (tmp_path / "motor.toml").write_text(spec.to_toml())
+    truth = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.15,
+             "KL_b1": 0.08, "KAB": 2e-14}
+    df = simulate_map(spec, truth, map_grid([100, 400, 1000, 2000], [20, 100, 200, 300], 2),
+                      noise={"torque_Nm": 0.3, "q_a_lpm": 0.05, "q_b_lpm": 0.05, "q_case_lpm": 0.02},
+                      rng=np.random.default_rng(5))
+    df.to_csv(tmp_path / "map.csv", index=False)
+    d = tmp_path / "fit"
+    assert main(["fit", str(tmp_path / "map.csv"), "--motor", str(tmp_path / "motor.toml"), "--out", str(d)]) == 0
+    doc = json.loads((d / "result.json").read_text())
+    assert doc["parameters"]["KFS"]["value"] is None and doc["parameters"]["Ks"]["value"] is None
+    capsys.readouterr()
+
+    s1, s2 = tmp_path / "s1", tmp_path / "s2"
+    assert main(["export", str(d), "--format", "simscape", "--out", str(s1), "--max-speed", "2000"]) == 0
+    assert main(["export", str(d), "--format", "simscape", "--out", str(s2), "--max-speed", "2000",
+                 "--assume", "KFS=0.05", "--assume", "Ks=2"]) == 0
+    for name in ("torque_loss.csv", "volumetric_loss.csv", "case_flow.csv"):
+        assert (s1 / name).read_bytes() == (s2 / name).read_bytes()
+    readme = (s1 / "README.txt").read_text()
+    assert "KFS: not determined" in readme and "KL_a1 = 0, as the fit held it" in readme
+    assert "KFS = 0.05 assumed (--assume)" in (s2 / "README.txt").read_text()
+
+    py = tmp_path / "m.py"
+    capsys.readouterr()
+    assert main(["export", str(d), "--format", "python", "--out", str(py)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "'KFS'" in err and "--assume KFS=" in err and not py.exists()
+    assert main(["export", str(d), "--format", "python", "--out", str(py), "--assume", "KFS=0.012",
+                 "--assume", "Ks=0.8"]) == 0
+    m = importlib.util.module_from_spec(importlib.util.spec_from_file_location("map_motor", py))
+    m.__spec__.loader.exec_module(m)
+    p_a, p_b = 200e5, 10e5
+    got = m.evaluate(p_a, p_b, 0.0, 0.0, 0.3, 323.15)["torque_breakaway"]
+    kf, tfc = doc["parameters"]["KF"]["value"], doc["parameters"]["TFc"]["value"]
+    want = spec.displacement * (p_a + p_b) * (kf + 0.012) + tfc * (1 + 0.8)  # MODEL.md: T_break
+    assert float(got) == pytest.approx(want, rel=1e-9)
+    # refused in one line: a parameter the fit determined; not KEY=VALUE
+    for bad, words in ((["--assume", "KF=3"], "the fit determined KF"), (["--assume", "KFS"], "KEY=VALUE")):
+        assert main(["export", str(d), "--format", "python", "--out", str(py), "--force", "--assume", "KFS=0.012",
+                     "--assume", "Ks=0.8", *bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and words in err

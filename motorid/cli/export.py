@@ -13,6 +13,9 @@ def register(sub):
     p.add_argument("--motor", help="motor spec TOML, where the one result.json names cannot be found")
     p.add_argument("--no-diagnosis", action="store_true", help="leave out the mechanisms of diagnosis.json")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--assume", action="append", default=[], metavar="KEY=VALUE",
+                   help="a value (SI, as in result.json) for a parameter the fit did not determine, e.g. "
+                        "--assume KFS=0.012 --assume Ks=0.8 for a map, which holds no breakaway; repeatable")
     g = p.add_argument_group("simscape tables")
     g.add_argument("--temperature", type=float, default=40.0, help="oil temperature of the tables [°C] (40)")
     g.add_argument("--max-pressure", type=float, default=350.0, help="largest |p_A − p_B| [bar] (350)")
@@ -40,6 +43,17 @@ def run_export(args) -> int:
         options = {"temperature": args.temperature + 273.15, "max_pressure": args.max_pressure * BAR,
                    "max_speed": args.max_speed * RPM, "p_low": args.low_pressure * BAR,
                    "p_case": args.case_pressure * BAR}
-    path = export(args.result_dir, args.fmt, out, motor=args.motor, diagnosis=not args.no_diagnosis, **options)
+    assume = {}
+    for item in args.assume:
+        key, sep, text = item.partition("=")
+        try:
+            value = float(text) if sep and key.strip() else math.nan
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise InputError(f"--assume {item}: expected KEY=VALUE with a finite number, e.g. --assume KFS=0.012")
+        assume[key.strip()] = value
+    path = export(args.result_dir, args.fmt, out, motor=args.motor, diagnosis=not args.no_diagnosis,
+                  assume=assume, **options)
     print(f"wrote {path}")
     return 0

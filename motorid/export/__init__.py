@@ -18,12 +18,18 @@ from pathlib import Path
 FORMATS = ("fmu", "simscape", "python")
 
 
-def export(result_dir, fmt: str, out, motor=None, diagnosis: bool = True, **options) -> Path:
+#: what the Simscape tables never evaluate: static friction (the tables' friction is 0 at ω = 0, where
+#: the model's stuck friction would act; they ramp through it between ±speed_min)
+SIMSCAPE_UNUSED = ("KFS", "Ks")
+
+
+def export(result_dir, fmt: str, out, motor=None, diagnosis: bool = True, assume=None, **options) -> Path:
     """Export the motor identified in ``result_dir`` as ``fmt`` to ``out``; returns the path written.
 
     fmt : "fmu" (a .fmu file), "simscape" (a folder), "python" (a .py file);
     motor : spec TOML where result.json's cannot be found; diagnosis : include
-    the accepted mechanisms of a diagnosis.json beside result.json;
+    the accepted mechanisms of a diagnosis.json beside result.json; assume : {parameter: value
+    [SI]} for parameters the fit did not determine (:func:`~motorid.export.source.load_identified`);
     options : of :func:`motorid.export.simscape.loss_tables` (simscape only).
     """
     from motorid.errors import InputError
@@ -31,7 +37,10 @@ def export(result_dir, fmt: str, out, motor=None, diagnosis: bool = True, **opti
 
     if fmt not in FORMATS:
         raise InputError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    identified = load_identified(result_dir, motor=motor, diagnosis=diagnosis)
+    unused = SIMSCAPE_UNUSED if fmt == "simscape" else ()
+    identified = load_identified(result_dir, motor=motor, diagnosis=diagnosis, assume=assume, unused=unused,
+                                 why_unused="static friction does not enter the loss tables (their friction "
+                                            "is 0 at zero speed): taken as 0, which changes no value")
     if fmt == "fmu":
         from motorid.export.fmu import FmuBuildError, build_fmu
 

@@ -231,6 +231,9 @@ Interpolation error (linear interpolation between breakpoints, as the block does
 
 Files: simscape_losses.mat (all arrays, SI), torque_loss.csv, volumetric_loss.csv, case_flow.csv
 (first row: w in rad/s; first column: dp in Pa).
+
+Notes
+{chr(10).join("  " + n for n in motor.notes)}
 """
 
 

@@ -44,10 +44,45 @@ def _read_json(path: Path, what: str) -> dict:
     return doc
 
 
-def _value(entry, key: str, where: str) -> float:
+#: the K_L(θ) harmonics: where the data did not determine them the fit held them at 0 (its θ-mean
+#: leakage), and so does the export
+HELD_AT_ZERO = ("KL_a1", "KL_b1")
+
+
+class _Undetermined:
+    """What an export does with a parameter the fit left without a value: the user's value
+    (``--assume KEY=VALUE``), 0 for a K_L harmonic (as the fit held it) or for a parameter the
+    format never evaluates (``unused``: static friction in the Simscape tables), else a refusal
+    naming the parameter and the option.  Each choice is written into the export's notes."""
+
+    def __init__(self, assume=None, unused=(), why_unused: str = ""):
+        self.assume = {str(k): float(v) for k, v in (assume or {}).items()}
+        self.unused, self.why_unused = set(unused), why_unused
+        self.notes: list = []
+        self.used_assumptions: set = set()
+
+    def value(self, key: str, reason: str, where: str) -> float:
+        if key in self.assume:
+            self.used_assumptions.add(key)
+            self.notes.append(f"{key} = {self.assume[key]:.6g} assumed (--assume): the fit did not determine "
+                              f"it ({reason})")
+            return self.assume[key]
+        if key in HELD_AT_ZERO:
+            self.notes.append(f"{key} = 0, as the fit held it: {reason}")
+            return 0.0
+        if key in self.unused:
+            self.notes.append(f"{key}: not determined ({reason}); {self.why_unused}")
+            return 0.0
+        raise InputError(f"{where}: parameter '{key}' has no value ({reason}); the export needs it: give it "
+                         f"with --assume {key}=VALUE (e.g. from another test of the motor)")
+
+
+def _value(entry, key: str, where: str, undetermined: _Undetermined | None = None) -> float:
     value = entry.get("value") if isinstance(entry, dict) else entry
     if value is None:
         reason = entry.get("reason", "not determined by the logs") if isinstance(entry, dict) else ""
+        if undetermined is not None:
+            return undetermined.value(key, reason, where)
         raise InputError(f"{where}: parameter '{key}' has no value ({reason}); the export needs every parameter")
     try:
         value = float(value)
@@ -91,13 +126,19 @@ def _find_spec(doc: dict, result_dir: Path, result_path: Path):
                      f"{', '.join(tried)}); give it with --motor SPEC.toml")
 
 
-def load_identified(result_dir, motor=None, diagnosis: bool = True) -> IdentifiedMotor:
+def load_identified(result_dir, motor=None, diagnosis: bool = True, assume=None, unused=(),
+                    why_unused: str = "") -> IdentifiedMotor:
     """The identified motor of a fit's folder (see the module docstring).
 
     result_dir : folder holding result.json; motor : a spec TOML overriding the
     one result.json names; diagnosis : include the mechanisms of a
-    diagnosis.json beside result.json.
+    diagnosis.json beside result.json; assume : {parameter: value [SI]} for parameters the
+    fit did not determine (a map holds no breakaway: K_FS, K_s); unused : parameters the
+    export never evaluates (taken as 0 where undetermined; ``why_unused`` says why, in the notes).
+    A K_L harmonic the fit did not determine is 0, as the fit held it.  An assumed value for a
+    parameter the fit did determine is refused.
     """
+    undetermined = _Undetermined(assume, unused, why_unused)
     from motorid.physics.registry import get
 
     result_dir = Path(result_dir)
@@ -114,7 +155,7 @@ def load_identified(result_dir, motor=None, diagnosis: bool = True) -> Identifie
     spec = load_motor_spec(spec_path)
     _check_spec(spec, doc["motor"], spec_path, result_path)
 
-    params = {k: _value(e, k, str(result_path)) for k, e in doc["parameters"].items()}
+    params = {k: _value(e, k, str(result_path), undetermined) for k, e in doc["parameters"].items()}
     mech_ids = list((doc.get("fit") or {}).get("mechanisms") or [])
     notes = [f"parameters from {result_path}", f"motor spec and oil from {spec_path}"]
 
@@ -126,13 +167,13 @@ def load_identified(result_dir, motor=None, diagnosis: bool = True) -> Identifie
             after = diag.get("parameters_after") or {}
             for k, e in after.items():
                 if k in params:
-                    params[k] = _value(e, k, str(diag_path))
+                    params[k] = _value(e, k, str(diag_path), undetermined)
             for m in accepted:
                 mid = m.get("id") if isinstance(m, dict) else None
                 if not isinstance(mid, str):
                     raise InputError(f"{diag_path}: a mechanism without an 'id'")
                 for k, e in (m.get("parameters") or {}).items():
-                    params[k] = _value(e, k, str(diag_path))
+                    params[k] = _value(e, k, str(diag_path), undetermined)
                 if mid not in mech_ids:
                     mech_ids.append(mid)
             notes.append(f"mechanisms accepted by {diag_path}: {', '.join(m['id'] for m in accepted)} "
@@ -160,6 +201,12 @@ def load_identified(result_dir, motor=None, diagnosis: bool = True) -> Identifie
     for need in ("Kv", "KF", "KFS", "TFc", "Ks", "KL0", "KAB"):
         if need not in base:
             raise InputError(f"{result_path}: parameters lack '{need}'")
+    determined = set(undetermined.assume) - undetermined.used_assumptions
+    if determined:
+        k = sorted(determined)[0]
+        raise InputError(f"--assume {k}: " + (f"the fit determined {k}; its value is the fit's"
+                                              if k in params else f"no parameter '{k}' in {result_path}"))
+    notes += list(dict.fromkeys(undetermined.notes))
     keep = set(base) | {k for m in mechanisms for k in m.parameters}
     params = {k: v for k, v in params.items() if k in keep}
     return IdentifiedMotor(spec=spec, params=params, mechanisms=tuple(mechanisms),
