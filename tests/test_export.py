@@ -270,11 +270,9 @@ def test_unknown_primitive_is_refused_by_name():
         emit_c_function(jaxpr)
 
 
-def test_a_map_fit_exports_its_losses_and_asks_for_the_static_friction_it_lacks(tmp_path, capsys):
-    """A loss map holds no breakaway: K_FS and K_s have no value.  The Simscape tables never use them
-    (byte for byte the same whatever is assumed), and the K_L harmonics the fit held at 0 are 0; an
-    export that does use them (the Python module's breakaway torque, the FMU's) asks for them by name,
-    writes nothing, and takes them with --assume."""
+def fitted_map(tmp_path, quadrants: int, seed: int):
+    """A simulated map of a 9-piston 80 cm³/rev motor (``tmp_path``/map.csv, its spec motor.toml)
+    fitted by ``motorid fit`` into ``tmp_path``/fit → (spec, the fit's folder, the map)."""
     from motorid.bench.maps import map_grid, simulate_map
     from motorid.cli import main
     from motorid.model import MotorSpec, OilSpec
@@ -283,12 +281,23 @@ def test_a_map_fit_exports_its_losses_and_asks_for_the_static_friction_it_lacks(
     (tmp_path / "motor.toml").write_text(spec.to_toml())
     truth = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.15,
              "KL_b1": 0.08, "KAB": 2e-14}
-    df = simulate_map(spec, truth, map_grid([100, 400, 1000, 2000], [20, 100, 200, 300], 2),
+    df = simulate_map(spec, truth, map_grid([100, 400, 1000, 2000], [20, 100, 200, 300], quadrants),
                       noise={"torque_Nm": 0.3, "q_a_lpm": 0.05, "q_b_lpm": 0.05, "q_case_lpm": 0.02},
-                      rng=np.random.default_rng(5))
+                      rng=np.random.default_rng(seed))
     df.to_csv(tmp_path / "map.csv", index=False)
     d = tmp_path / "fit"
     assert main(["fit", str(tmp_path / "map.csv"), "--motor", str(tmp_path / "motor.toml"), "--out", str(d)]) == 0
+    return spec, d, df
+
+
+def test_a_map_fit_exports_its_losses_and_asks_for_the_static_friction_it_lacks(tmp_path, capsys):
+    """A loss map holds no breakaway: K_FS and K_s have no value.  The Simscape tables never use them
+    (byte for byte the same whatever is assumed), and the K_L harmonics the fit held at 0 are 0; an
+    export that does use them (the Python module's breakaway torque, the FMU's) asks for them by name,
+    writes nothing, and takes them with --assume."""
+    from motorid.cli import main
+
+    spec, d, _ = fitted_map(tmp_path, quadrants=2, seed=5)
     doc = json.loads((d / "result.json").read_text())
     assert doc["parameters"]["KFS"]["value"] is None and doc["parameters"]["Ks"]["value"] is None
     capsys.readouterr()

@@ -227,3 +227,36 @@ q_a_lpm   = {name = "Q_4Q", unit = "m3/s", sign = -1}
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "P_4Q" in err and "w_4Q" in err and "bad.mat" in err
     assert not (tmp_path / "r2").exists()
+
+
+def test_loss_tables_in_simscape_convention_give_back_the_motor_that_made_them(tmp_path, capsys):
+    """Loss tables as a Simscape user holds them (Simscape's tabulated-loss convention:
+    T = DΔP/2π − T_loss, Q_A = Dω/2π + Q_loss), here written by ``motorid export --format simscape``
+    from a map fit: read through a channel map (loss columns, [grid] axes as row vectors), fitted,
+    they give back that fit's parameters; a table with a loss column and the same reading is refused."""
+    from test_export import fitted_map
+
+    _, first_fit, df = fitted_map(tmp_path, quadrants=4, seed=8)
+    motor = tmp_path / "motor.toml"
+    assert main(["export", str(first_fit), "--format", "simscape", "--out", str(tmp_path / "ss"),
+                 "--temperature", "45", "--max-speed", "2500"]) == 0
+    (tmp_path / "ss.toml").write_text(
+        '[constants]\noil_temp_C = 45.0\n[grid]\naxes = ["dp_bar", "speed_rpm"]\n[channels]\n'
+        'dp_bar = {name = "pressure_drop_Pa", unit = "Pa"}\n'
+        'speed_rpm = {name = "shaft_speed_rad_s", unit = "rad/s"}\n'
+        'torque_loss_Nm = {name = "torque_loss_Nm", unit = "N*m"}\n'
+        'q_loss_lpm = {name = "volumetric_loss_m3_s", unit = "m3/s"}\n'
+        'q_case_lpm = {name = "case_flow_m3_s", unit = "m3/s"}\n')
+    capsys.readouterr()
+    assert main(["fit", str(tmp_path / "ss" / "simscape_losses.mat"), "--channels", str(tmp_path / "ss.toml"),
+                 "--motor", str(motor), "--out", str(tmp_path / "f2")]) == 0
+    assert "Q_A = Dω/2π + Q_loss" in capsys.readouterr().out
+    first = json.loads((first_fit / "result.json").read_text())["parameters"]
+    again = json.loads((tmp_path / "f2" / "result.json").read_text())["parameters"]
+    for k in ("Kv", "KF", "TFc", "KL0", "KAB"):
+        assert again[k]["value"] == pytest.approx(first[k]["value"], rel=1e-6), k
+    # the same quantity twice: a loss column and the reading it derives
+    df.assign(torque_loss_Nm=1.0).to_csv(tmp_path / "both.csv", index=False)
+    assert main(["fit", str(tmp_path / "both.csv"), "--motor", str(motor), "--out", str(tmp_path / "f3")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "torque_loss_Nm" in err and "keep one" in err

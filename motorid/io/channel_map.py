@@ -76,11 +76,14 @@ COLUMNS = {
     # a data sheet's efficiencies (a fraction in the table; io/efficiency_columns.py derives torque and flow)
     "volumetric_efficiency": "efficiency", "hydromechanical_efficiency": "efficiency",
     "overall_efficiency": "efficiency",
+    # a loss table's losses, Simscape's convention (io/efficiency_columns.py derives torque and port A flow)
+    "torque_loss_Nm": "torque", "q_loss_lpm": "flow",
 }
 LOG_REQUIRED = ("time_s", "run_id", "protocol", "shaft_angle_deg", "speed_rpm", "torque_Nm", "p_a_bar",
                 "p_b_bar", "p_case_bar", "q_a_lpm", "q_b_lpm", "q_case_lpm", "oil_temp_C")
 TABLE_OUTPUTS = ("torque_Nm", "q_a_lpm", "q_b_lpm", "q_case_lpm")
-EFFICIENCY_OUTPUTS = ("volumetric_efficiency", "hydromechanical_efficiency", "overall_efficiency")
+EFFICIENCY_OUTPUTS = ("volumetric_efficiency", "hydromechanical_efficiency", "overall_efficiency",
+                      "torque_loss_Nm", "q_loss_lpm")  # outputs derived from efficiencies or losses
 PUMP_SIGN = ("torque_Nm", "q_a_lpm", "q_b_lpm")  # negated by convention = "pump"
 FORMATS = ("csv", "text", "mat", "hdf5", "parquet", "xlsx", "tdms", "mdf")
 
@@ -630,7 +633,7 @@ def _check_complete(cmap: ChannelMap):
                          f"speed_rpm and p_a_bar, p_b_bar or dp_bar; with no time_s the map is a table)")
     if not any(c in cmap.channels for c in TABLE_OUTPUTS + EFFICIENCY_OUTPUTS):
         raise InputError(f"{cmap.path}: [channels]: an operating-point table needs one output "
-                         f"({', '.join(TABLE_OUTPUTS)}, or efficiencies: {', '.join(EFFICIENCY_OUTPUTS)})")
+                         f"({', '.join(TABLE_OUTPUTS)}, or efficiencies or losses: {', '.join(EFFICIENCY_OUTPUTS)})")
 
 
 def load_channel_map(path) -> ChannelMap:

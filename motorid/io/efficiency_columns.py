@@ -1,4 +1,5 @@
-"""Efficiency columns of an operating-point table: a data sheet's η_v, η_hm, η → torque and flow.
+"""Efficiency and loss columns of an operating-point table: a data sheet's η_v, η_hm, η, or a loss
+table's T_loss and Q_loss → torque and flow (loss columns: :func:`outputs_from_losses`).
 
 Makers publish loss maps as efficiencies more often than as torque and flow.  With
 the theoretical flow Q_th = D|ω|/2π and torque T_th = D|ΔP|/2π they give back the
@@ -34,6 +35,42 @@ for _key, _names in (("v", ("volumetric_efficiency", "eta_v", "eff_v", "vol_eff"
         HEADERS[_name + "_%"] = (_key, 0.01)
 
 WORDS = {"v": "volumetric", "hm": "hydromechanical", "t": "overall"}
+
+
+def loss_headers(torque_units: dict, flow_units: dict) -> dict:
+    """Loss columns (normalized header → (loss, factor to SI)): ``torque_loss_<torque unit>`` and
+    ``q_loss_`` / ``volumetric_loss_`` / ``flow_loss_<flow unit>`` (the units of the log reader)."""
+    out = {f"torque_loss_{u}": ("torque", f) for u, f in torque_units.items()}
+    for base in ("q_loss", "volumetric_loss", "flow_loss"):
+        out.update({f"{base}_{u}": ("q", f) for u, f in flow_units.items()})
+    return out
+
+
+def outputs_from_losses(loss: dict, speed, p_a, p_b, displacement) -> tuple[dict, list]:
+    """Loss columns → ({"torque", "q_a"} [SI, NaN where not given], words for the table's notes).
+
+    The convention of Simscape's tabulated-loss motor blocks (and of ``motorid export --format
+    simscape``), in every quadrant, with no mode switch:
+
+        T   = D ΔP / 2π − T_loss          (shaft torque delivered; T_loss has the sign of ω, plus
+                                           its pressure part)
+        Q_A = D ω / 2π + Q_loss           (flow into port A; Q_loss, the leakage, signed like ΔP)
+
+    loss : "torque" [N·m] and/or "q" [m³/s] per point (NaN where empty); speed [rad/s], pressures
+    [Pa], displacement [m³/rev] per point."""
+    dp = np.asarray(p_a, float) - np.asarray(p_b, float)
+    w = np.asarray(speed, float)
+    d = np.asarray(displacement, float)
+    out, parts = {}, []
+    if "torque" in loss:
+        out["torque"] = d * dp / (2 * np.pi) - np.asarray(loss["torque"], float)
+        parts.append("the torque as T = DΔP/2π − T_loss")
+    if "q" in loss:
+        out["q_a"] = d * w / (2 * np.pi) + np.asarray(loss["q"], float)
+        parts.append("the flow into port A as Q_A = Dω/2π + Q_loss (Q_loss signed like ΔP)")
+    notes = [f"{' and '.join(parts)} from the loss columns (Simscape's tabulated-loss convention); the "
+             "other port and the case drain are not in a loss column"]
+    return out, notes
 
 
 def outputs_from_efficiencies(eff: dict, speed, p_a, p_b, displacement) -> tuple[dict, list]:

@@ -23,8 +23,9 @@ import numpy as np
 
 from motorid.errors import InputError
 from motorid.io.efficiency_columns import HEADERS as EFFICIENCY_HEADERS, outputs_from_efficiencies
-from motorid.io.logs import (_BY_SI, _HEADERS, _NA_STRINGS, _PRESSURE_UNITS, _oil_viscosity, _parse_body,
-                          _read_text, _split_header, _unit_hint, normalize_header)
+from motorid.io.efficiency_columns import loss_headers, outputs_from_losses
+from motorid.io.logs import (_BY_SI, _FLOW_UNITS, _HEADERS, _PRESSURE_UNITS, _TORQUE_UNITS,
+                          _oil_viscosity, _parse_body, _read_text, _split_header, _unit_hint, normalize_header)
 
 #: the outputs a table may give, SI column of the logs → channel name of the fit
 OUTPUTS = {"torque_Nm": "torque", "q_a_m3_s": "q_a", "q_b_m3_s": "q_b", "q_case_m3_s": "q_case"}
@@ -33,6 +34,7 @@ _DISPLACEMENT_UNITS = {"cm3": 1e-6, "cc": 1e-6, "ml": 1e-6, "cm3_rev": 1e-6, "cc
                        "m3": 1.0, "m3_rev": 1.0, "l": 1e-3, "l_rev": 1e-3, "in3": 1.6387064e-5,
                        "in3_rev": 1.6387064e-5}
 _DP_HEADERS = {f"{b}_{u}": u for b in ("dp", "delta_p", "deltap", "p_ab") for u in _PRESSURE_UNITS}
+_LOSS_HEADERS = loss_headers(_TORQUE_UNITS, _FLOW_UNITS)
 _ID_HEADERS = ("point_id", "pointid", "point", "id")
 _COUNT_HEADERS = ("n_samples", "samples", "n", "count")
 #: below this |speed| a point is at rest [rad/s] (0.01 rpm)
@@ -191,6 +193,9 @@ def _map_table_columns(path: Path, fields: list):
         elif norm in EFFICIENCY_HEADERS:  # a data sheet's efficiencies: torque and flow derived from them
             key, scale = EFFICIENCY_HEADERS[norm]
             put("eff:" + key, j, scale, name)
+        elif norm in _LOSS_HEADERS:  # a loss table's T_loss, Q_loss: torque and port A flow derived from them
+            key, factor = _LOSS_HEADERS[norm]
+            put("loss:" + key, j, factor, name)
         elif norm.startswith("displacement_") and norm[len("displacement_"):] in _DISPLACEMENT_UNITS:
             put("displacement_m3", j, norm[len("displacement_"):], name)
         elif "_std_" in norm and norm.replace("_std_", "_", 1) in _HEADERS:
@@ -244,10 +249,11 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
         raise InputError(f"{path}: no such file")
     fields, delim, body, header_line = _header_fields(path)
     found = _map_table_columns(path, fields)
-    if require_outputs and not any(k in found for k in OUTPUTS) and not any(k.startswith("eff:") for k in found):
+    if require_outputs and not (any(k in found for k in OUTPUTS) or any(k.startswith(("eff:", "loss:")) for k in found)):
         raise InputError(f"{path}: no output column: a table for a fit needs at least one of torque_Nm, q_a_lpm, "
                          f"q_b_lpm, q_case_lpm (or efficiencies: volumetric_efficiency, "
-                         f"hydromechanical_efficiency, overall_efficiency, fractions or _pct)")
+                         f"hydromechanical_efficiency, overall_efficiency, fractions or _pct; or losses: "
+                         f"torque_loss_Nm, q_loss_lpm)")
     parse_keys = {k: v for k, v in found.items() if k not in ("point_id", "recording")}
     if "point_id" in found:
         parse_keys["run_id"] = found["point_id"]
@@ -403,6 +409,16 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
                 used = True
         if used:
             notes += [f"{path.name}: {w}" for w in words]
+    losses = {k[5:]: column(k)[0] * found[k][1] for k in found if k.startswith("loss:")}
+    if losses:
+        for key, c in (("torque", "torque"), ("q", "q_a")):
+            if key in losses and np.isfinite(measured[c]).any():
+                raise InputError(f"{path}: columns '{fields[found['loss:' + key][0]]}' and the {c} reading give "
+                                 f"the same quantity; keep one")
+        derived, words = outputs_from_losses(losses, speed, p_a, p_b, displacement)
+        for c, x in derived.items():
+            measured[c] = np.where(np.isfinite(x), x, np.nan)
+        notes += [f"{path.name}: {w}" for w in words]
     stall = np.isfinite(measured["torque"]) & (np.abs(speed) < STALL_SPEED)
     if stall.any():  # a held shaft's torque is anywhere within its static friction: no running law
         measured["torque"] = np.where(stall, np.nan, measured["torque"])
