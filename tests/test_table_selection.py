@@ -88,3 +88,35 @@ def test_a_big_table_is_diagnosed_on_its_spread_and_fitted_on_every_point(tmp_pa
     monkeypatch.setattr(dt, "SELECTION_POINTS", 2000)
     assert diagnosis_table_document({**dg, "selection_points": {"points": 512, "of": 512}}, SPEC)[
         "selection"].get("points_note") is None
+
+
+def test_on_a_pump_map_alone_a_law_that_differs_between_the_modes_is_not_tried(tmp_path):
+    """A pump's own map (every point in pump mode, as the V32HL56 map of docs/maps.md): a friction that
+    differs in pump mode is K_F itself in other words (it was named there with ΔK_F < 0 and K_F at 0).
+    Not tried, with the reason; a map with both modes tries it.  A displacement error on a variable
+    unit's table is told relative to the table's displacement column."""
+    from motorid.discrepancy.tables import diagnose_table, diagnosis_table_document
+    from motorid.physics.registry import get
+
+    pmf = get("pump_mode_friction")
+    both = _table(tmp_path, [500, 1500, 3000], [50, 150, 300], quadrants=2, name="both.csv")
+    assert pmf.unseen_in_table(both) is None
+    pump = both.subset(np.sign(both.speed) * both.dp < 0)
+    assert len(pump) == 9
+    why = pmf.unseen_in_table(pump)
+    assert "9 pump-mode and 0 motor-mode points" in why and "K_F in other words" in why
+    dg = diagnose_table(pump, SPEC, candidates=[pmf], max_mechanisms=1)
+    assert not dg["mechanisms"] and {"id": "pump_mode_friction", "skipped": why} in dg["steps"]
+
+    eps = get("displacement_error")
+    variable = _table(tmp_path, [500, 1500, 3000], [50, 150, 300], name="var.csv")
+    variable.variable_displacement = True
+    variable.displacement = np.where(np.arange(len(variable)) % 2, 40e-6, 80e-6)
+    words = eps.describe_per_point({"displacement_error.eps": -0.01}, variable.displacement)
+    assert "-1 % from the table's displacement column" in words and "40 → 39.6" in words and "80 → 79.2" in words
+    fake = {"mechanisms": [eps], "fit": dg["fit"], "base_fit": dg["base_fit"], "steps": [], "comparison": None,
+            "unexplained": []}
+    fake["fit"].ls.params_all["displacement_error.eps"] = -0.01
+    fake["fit"].table = variable
+    doc = diagnosis_table_document(fake, SPEC)
+    assert "table's displacement column" in doc["mechanisms"][0]["description"]

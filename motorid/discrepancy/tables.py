@@ -243,7 +243,11 @@ def diagnosis_table_document(dg: dict, spec) -> dict:
         entry = {"id": m.id, "name": getattr(m, "name", m.id), "reference": getattr(m, "reference", ""),
                  "parameters": params, "signature": getattr(m, "signature", "")}
         try:
-            entry["description"] = m.describe({k: fit.ls.params_all[k] for k in m.parameters}, spec)
+            values = {k: fit.ls.params_all[k] for k in m.parameters}
+            if getattr(fit.table, "variable_displacement", False) and hasattr(m, "describe_per_point"):
+                entry["description"] = m.describe_per_point(values, fit.table.displacement)
+            else:
+                entry["description"] = m.describe(values, spec)
         except (NotImplementedError, KeyError, TypeError, ValueError):
             pass
         if hasattr(m, "temperature_differences"):

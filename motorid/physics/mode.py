@@ -35,6 +35,10 @@ def pump_mode_share(direction, dp, scale=MODE_SMOOTHING):
     return 0.5 * (1.0 - direction * jnp.tanh(dp / scale))
 
 
+#: points of each mode a table needs before a law differing between the modes is tried on it
+MIN_POINTS_PER_MODE = 4
+
+
 class PumpModeFriction(CatalogMechanism):
     """A pressure-proportional friction that differs in pump mode [N·m].
 
@@ -85,10 +89,25 @@ class PumpModeFriction(CatalogMechanism):
 
     def seen_by(self, dataset) -> bool:
         """Whether the campaign has pump-mode running samples (|ΔP| > 4 bar against the
-        direction of rotation); diagnose does not try the mechanism where it has none."""
+        direction of rotation) and motor-mode ones (with it); diagnose does not try the mechanism
+        where it lacks either: with pump mode alone ΔK_F is K_F in other words."""
         s = dataset.running
-        pump = np.asarray(s.direction) * (np.asarray(s.p_a) - np.asarray(s.p_b)) < -4.0 * MODE_SMOOTHING
-        return bool(np.count_nonzero(pump) >= 20)
+        power = np.asarray(s.direction) * (np.asarray(s.p_a) - np.asarray(s.p_b))
+        return bool(np.count_nonzero(power < -4.0 * MODE_SMOOTHING) >= 20
+                    and np.count_nonzero(power > 4.0 * MODE_SMOOTHING) >= 20)
+
+    def unseen_in_table(self, table) -> str | None:
+        """A table needs points of both modes (|ΔP| > 4 bar): on points of one mode alone the
+        change from one mode to the other is the friction coefficient K_F itself (on a pump's map,
+        the pump-mode law is the only law)."""
+        power = np.sign(np.asarray(table.speed, float)) * np.asarray(table.dp, float)
+        pump = int(np.count_nonzero(power < -4.0 * MODE_SMOOTHING))
+        motor = int(np.count_nonzero(power > 4.0 * MODE_SMOOTHING))
+        if min(pump, motor) >= MIN_POINTS_PER_MODE:
+            return None
+        return (f"the table holds {pump} pump-mode and {motor} motor-mode points: a friction law that differs "
+                f"between the modes needs at least {MIN_POINTS_PER_MODE} points of each, and on one mode alone its "
+                f"change is the friction coefficient K_F in other words")
 
     def running(self, params, spec, samples, ch):
         s = samples

@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
 from motorid.physics import flow, torque
@@ -106,6 +107,15 @@ class DisplacementError(CatalogMechanism):
             return (f"the measured displacement is {d * (1 + eps):.4g} cm³/rev, {100 * eps:+.3g} % from the spec's "
                     f"{d:.4g} cm³/rev (K_v, K_F, K_FS are relative to the spec's D)")
         return f"the true displacement is {100 * eps:+.3g} % from the spec's (D' = D·(1 {'+' if eps >= 0 else '−'} {abs(eps):.3g}))"
+
+    def describe_per_point(self, values, displacement) -> str:
+        """The words where a table gives each point's displacement (a variable unit): ε is relative to that
+        column, at every setting alike; ``displacement`` [m³/rev] the table's values."""
+        eps = self.value(values, "eps")
+        settings = np.unique(np.round(np.asarray(displacement, float) * 1e6, 1))
+        shown = ", ".join(f"{d:.4g} → {d * (1 + eps):.4g}" for d in settings[:6]) + (" …" if settings.size > 6 else "")
+        return (f"the displacement is {100 * eps:+.3g} % from the table's displacement column, at every setting "
+                f"alike (cm³/rev: {shown})")
 
 
 class LeakPhase(CatalogMechanism):
