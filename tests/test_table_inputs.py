@@ -431,3 +431,38 @@ def test_the_efficiency_maps_of_a_dense_grid_show_their_colours(tmp_path):
     rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
     dark = np.all(rgb < 40, axis=2).mean()
     assert dark < 0.10, f"{dark:.0%} of the picture is black"
+
+
+def test_a_variable_units_maps_are_drawn_setting_by_setting(tmp_path):
+    """Points of several displacement settings at one (ΔP, ω) were contoured across settings (the
+    V32HL56 pump's five settings gave jagged nonsense): each setting now has its own maps, the
+    largest first; displacements a lab derived point by point (within 5 %) are one setting."""
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.identify.tables import fit_table
+    from motorid.io.tables import read_table
+    from motorid.model import MotorSpec, OilSpec
+    from motorid.report.maps import MAX_SETTINGS, displacement_settings, render_map_report
+
+    spec = MotorSpec("var", 9, 80e-6, 0.005, oil=OilSpec(temp_C=50.0))
+    truth = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.0,
+             "KL_b1": 0.0, "KAB": 2e-14}
+    grid = map_grid([500, 1000, 2000, 3000], [50, 150, 250], 1)
+    grid = np.concatenate([grid, grid, grid])
+    disp = np.repeat([80.0, 60.0, 40.0], len(grid) // 3) * (1 + 0.01 * np.sin(np.arange(len(grid))))
+    df = simulate_map(spec, truth, grid, noise={"torque_Nm": 0.2, "q_a_lpm": 0.05, "q_b_lpm": 0.05,
+                                                "q_case_lpm": 0.02}, rng=np.random.default_rng(2),
+                      displacement_cm3=disp)
+    df.to_csv(tmp_path / "var.csv", index=False)
+    t = read_table(tmp_path / "var.csv", spec)
+    groups = displacement_settings(t)
+    assert [len(g) for g in groups] == [12, 12, 12]
+    assert [round(float(np.median(t.displacement[g])) * 1e6) for g in groups] == [80, 60, 40]
+    tf = fit_table(t, spec)
+    page = render_map_report({"motor": {"name": "var"}, "table": {"points": len(t), "files": []},
+                              "parameters": {}}, tf)
+    assert page.count("<img") == 3 <= MAX_SETTINGS
+    at = [page.index(f"D ≈ {d}") for d in ("80", "60", "40")]
+    assert at == sorted(at)
+    fixed = t.subset(groups[0])
+    fixed.variable_displacement = False
+    assert len(displacement_settings(fixed)) == 1

@@ -112,10 +112,11 @@ class DisplacementError(CatalogMechanism):
         """The words where a table gives each point's displacement (a variable unit): ε is relative to that
         column, at every setting alike; ``displacement`` [m³/rev] the table's values."""
         eps = self.value(values, "eps")
-        settings = np.unique(np.round(np.asarray(displacement, float) * 1e6, 1))
-        shown = ", ".join(f"{d:.4g} → {d * (1 + eps):.4g}" for d in settings[:6]) + (" …" if settings.size > 6 else "")
+        d = np.asarray(displacement, float) * 1e6
+        lo, hi = float(np.nanmin(d)), float(np.nanmax(d))
         return (f"the displacement is {100 * eps:+.3g} % from the table's displacement column, at every setting "
-                f"alike (cm³/rev: {shown})")
+                f"alike (cm³/rev: {lo:.4g} → {lo * (1 + eps):.4g} at the smallest, {hi:.4g} → {hi * (1 + eps):.4g} "
+                f"at the largest)")
 
 
 class LeakPhase(CatalogMechanism):

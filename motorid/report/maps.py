@@ -22,6 +22,10 @@ BAR, RPM = 1e5, 2 * np.pi / 60
 ROWS = (("volumetric", "η_v"), ("hydromechanical", "η_hm"), ("overall", "η"))
 #: the measured points are marked on the maps where there are at most this many
 MARKED_POINTS = 600
+#: a variable unit's points whose displacements lie within this share of a setting's largest are one setting
+SETTING_TOLERANCE = 0.05
+#: the efficiency maps of at most this many displacement settings (the largest) are drawn
+MAX_SETTINGS = 4
 
 
 def _esc(x) -> str:
@@ -36,6 +40,27 @@ def efficiency_arrays(table, channels: dict) -> dict:
                               np.asarray(channels["q_b"], float), table.speed, table.p_a, table.p_b,
                               table.displacement)
     return {"volumetric": np.asarray(ev), "hydromechanical": np.asarray(ehm), "overall": np.asarray(e)}
+
+
+def displacement_settings(table) -> list:
+    """The points of each displacement setting of a variable unit (index arrays, largest setting first;
+    displacements within :data:`SETTING_TOLERANCE` of the setting's largest are one setting); one array of
+    every point where the displacement is fixed.  A map of a variable unit is drawn setting by setting:
+    points of several settings at one (ΔP, ω) would be contoured across settings."""
+    n = len(table)
+    if not getattr(table, "variable_displacement", False) or n == 0:
+        return [np.arange(n)]
+    d = np.asarray(table.displacement, float)
+    order = np.argsort(-d, kind="stable")
+    groups, current, top = [], [order[0]], d[order[0]]
+    for i in order[1:]:
+        if d[i] >= top * (1.0 - SETTING_TOLERANCE):
+            current.append(i)
+        else:
+            groups.append(np.sort(np.array(current)))
+            current, top = [i], d[i]
+    groups.append(np.sort(np.array(current)))
+    return groups
 
 
 def plot_efficiency_maps(table, predicted: dict):
@@ -194,17 +219,31 @@ def render_map_report(doc: dict, tf, diagnosis: dict | None = None) -> str:
     where it was run)."""
     from motorid.report.html import CSS
 
-    plot = plot_efficiency_maps(tf.table, tf.table_prediction)
     motor = doc.get("motor", {})
     t = doc.get("table", {})
-    if plot is not None:
+    settings = displacement_settings(tf.table)
+    figures = []
+    for idx in settings[:MAX_SETTINGS]:
+        sub = tf.table if len(settings) == 1 else tf.table.subset(idx)
+        pred = tf.table_prediction if len(settings) == 1 else {
+            c: np.asarray(v)[idx] for c, v in tf.table_prediction.items()}
+        plot = plot_efficiency_maps(sub, pred)
+        if plot is None:
+            continue
         facts = "; ".join(f"{k}: RMS residual {v['rms_residual']:.4f} over {v['points']} points"
                           for k, v in plot.facts.items())
-        maps = (f"<figure>{plot.img}<figcaption>Efficiencies over (ΔP, speed), all quadrants (motor mode where "
-                f"ΔP·ω &gt; 0, pump mode where &lt; 0; definitions in docs/maps.md): measured, predicted by the "
-                f"fitted model at the same points, and measured − predicted. {_esc(facts)}.</figcaption></figure>")
-    else:
-        maps = '<p class="missing">No efficiency can be formed: the table lacks torque or the port flows.</p>'
+        setting = "" if len(settings) == 1 else (
+            f"At the displacement setting D ≈ {np.median(sub.displacement) * 1e6:.4g} cm³/rev "
+            f"({len(sub)} points). ")
+        figures.append(f"<figure>{plot.img}<figcaption>{_esc(setting)}Efficiencies over (ΔP, speed), all quadrants "
+                       f"(motor mode where ΔP·ω &gt; 0, pump mode where &lt; 0; definitions in docs/maps.md): "
+                       f"measured, predicted by the fitted model at the same points, and measured − predicted. "
+                       f"{_esc(facts)}.</figcaption></figure>")
+    if len(settings) > MAX_SETTINGS and figures:
+        figures.append(f"<p>{len(settings)} displacement settings in the table: the {MAX_SETTINGS} largest are "
+                       f"drawn.</p>")
+    maps = "\n".join(figures) or ('<p class="missing">No efficiency can be formed: the table lacks torque or the '
+                                   'port flows.</p>')
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              f"<title>motorid map report: {_esc(motor.get('name', 'motor'))}</title>", f"<style>{CSS}</style>",
              "</head><body>", f"<h1>motorid map report: {_esc(motor.get('name', 'motor'))}</h1>",
