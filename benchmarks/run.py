@@ -23,7 +23,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 STUDIES = ["bench_speed", "bench_discrepancy", "bench_estimators", "bench_design", "bench_scaling", "bench_foreign",
            "bench_fleet", "bench_export", "bench_causes", "bench_maps", "bench_formats", "bench_mapphysics",
-           "bench_memory", "bench_memory_hdf5", "bench_diagnose", "bench_angle_free"]
+           "bench_memory", "bench_memory_hdf5", "bench_diagnose", "bench_angle_free", "bench_real_maps"]
 
 
 def machine() -> str:
