@@ -332,3 +332,52 @@ def test_a_map_fit_exports_its_losses_and_asks_for_the_static_friction_it_lacks(
                      "--assume", "Ks=0.8", *bad]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and words in err
+
+
+def test_a_variable_unit_exports_at_the_setting_asked_for(tmp_path, capsys):
+    """A fit of a variable unit's map (a displacement per point) is the model at each point's D: the
+    export is at the spec's D with a note saying so, or at --displacement; there the exported module,
+    averaged over shaft angle, gives what ``motorid predict`` gives at that displacement.  A fixed
+    unit refuses --displacement in one line."""
+    import pandas as pd
+
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.cli import main
+    from motorid.model import MotorSpec, OilSpec
+
+    spec = MotorSpec("var-9", 9, 80e-6, 0.005, oil=OilSpec(temp_C=50.0))
+    (tmp_path / "motor.toml").write_text(spec.to_toml())
+    truth = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.0,
+             "KL_b1": 0.0, "KAB": 2e-14}
+    grid = map_grid([300, 1000, 2000], [50, 150, 250], 2)
+    grid = np.concatenate([grid, grid])
+    disp = np.repeat([80.0, 45.0], len(grid) // 2)
+    simulate_map(spec, truth, grid, noise={"torque_Nm": 0.2, "q_a_lpm": 0.05, "q_b_lpm": 0.05,
+                                           "q_case_lpm": 0.02}, rng=np.random.default_rng(4),
+                 displacement_cm3=disp).to_csv(tmp_path / "var.csv", index=False)
+    d = tmp_path / "fit"
+    assert main(["fit", str(tmp_path / "var.csv"), "--motor", str(tmp_path / "motor.toml"), "--out", str(d)]) == 0
+    py, py50 = tmp_path / "m.py", tmp_path / "m50.py"
+    common = ["--assume", "KFS=0.015", "--assume", "Ks=1.0"]
+    assert main(["export", str(d), "--format", "python", "--out", str(py), *common]) == 0
+    assert "variable unit" in py.read_text() and "--displacement" in py.read_text()
+    assert main(["export", str(d), "--format", "python", "--out", str(py50), "--displacement", "50", *common]) == 0
+    assert "at the displacement setting 50 cm3/rev" in py50.read_text()
+    (tmp_path / "pts.csv").write_text("speed_rpm,p_a_bar,p_b_bar,displacement_cm3\n1500,200,5,50\n1500,200,5,80\n")
+    assert main(["predict", str(d), str(tmp_path / "pts.csv"), "--out", str(tmp_path / "pred.csv")]) == 0
+    want = pd.read_csv(tmp_path / "pred.csv")["torque_Nm"].to_numpy()
+    theta = np.linspace(0, 2 * np.pi, 4096, endpoint=False)
+    for path, expected in ((py50, want[0]), (py, want[1])):
+        mod = importlib.util.module_from_spec(importlib.util.spec_from_file_location(path.stem, path))
+        mod.__spec__.loader.exec_module(mod)
+        got = np.mean(mod.evaluate(200e5, 5e5, 0.0, 1500 * 2 * np.pi / 60, theta, 323.15)["torque"])
+        assert got == pytest.approx(expected, rel=2e-3)
+    assert abs(want[0] / want[1] - 50 / 80) < 0.05  # the setting matters: the check could fail
+    # a fixed unit: one line, nothing written
+    (tmp_path / "fixed").mkdir()
+    _, fixed, _ = fitted_map(tmp_path / "fixed", quadrants=2, seed=5)
+    capsys.readouterr()
+    out = tmp_path / "f.py"
+    assert main(["export", str(fixed), "--format", "python", "--out", str(out), "--displacement", "50", *common]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "fixed-displacement unit" in err and not out.exists()

@@ -13,6 +13,9 @@ def register(sub):
     p.add_argument("--motor", help="motor spec TOML, where the one result.json names cannot be found")
     p.add_argument("--no-diagnosis", action="store_true", help="leave out the mechanisms of diagnosis.json")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--displacement", type=float, metavar="CM3",
+                   help="a variable unit's setting to export at [cm3/rev] (a fit of a table with a displacement "
+                        "column; default: the spec's)")
     p.add_argument("--assume", action="append", default=[], metavar="KEY=VALUE",
                    help="a value (SI, as in result.json) for a parameter the fit did not determine, e.g. "
                         "--assume KFS=0.012 --assume Ks=0.8 for a map, which holds no breakaway; repeatable")
@@ -53,7 +56,8 @@ def run_export(args) -> int:
         if not math.isfinite(value):
             raise InputError(f"--assume {item}: expected KEY=VALUE with a finite number, e.g. --assume KFS=0.012")
         assume[key.strip()] = value
+    displacement = None if args.displacement is None else args.displacement * 1e-6
     path = export(args.result_dir, args.fmt, out, motor=args.motor, diagnosis=not args.no_diagnosis,
-                  assume=assume, **options)
+                  assume=assume, displacement=displacement, **options)
     print(f"wrote {path}")
     return 0

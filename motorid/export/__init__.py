@@ -23,13 +23,15 @@ FORMATS = ("fmu", "simscape", "python")
 SIMSCAPE_UNUSED = ("KFS", "Ks")
 
 
-def export(result_dir, fmt: str, out, motor=None, diagnosis: bool = True, assume=None, **options) -> Path:
+def export(result_dir, fmt: str, out, motor=None, diagnosis: bool = True, assume=None, displacement=None,
+           **options) -> Path:
     """Export the motor identified in ``result_dir`` as ``fmt`` to ``out``; returns the path written.
 
     fmt : "fmu" (a .fmu file), "simscape" (a folder), "python" (a .py file);
     motor : spec TOML where result.json's cannot be found; diagnosis : include
     the accepted mechanisms of a diagnosis.json beside result.json; assume : {parameter: value
     [SI]} for parameters the fit did not determine (:func:`~motorid.export.source.load_identified`);
+    displacement : [m³/rev] the setting of a variable unit to export at (None: the spec's);
     options : of :func:`motorid.export.simscape.loss_tables` (simscape only).
     """
     from motorid.errors import InputError
@@ -39,6 +41,7 @@ def export(result_dir, fmt: str, out, motor=None, diagnosis: bool = True, assume
         raise InputError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     unused = SIMSCAPE_UNUSED if fmt == "simscape" else ()
     identified = load_identified(result_dir, motor=motor, diagnosis=diagnosis, assume=assume, unused=unused,
+                                 displacement=displacement,
                                  why_unused="static friction does not enter the loss tables (their friction "
                                             "is 0 at zero speed): taken as 0, which changes no value")
     if fmt == "fmu":

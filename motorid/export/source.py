@@ -126,8 +126,32 @@ def _find_spec(doc: dict, result_dir: Path, result_path: Path):
                      f"{', '.join(tried)}); give it with --motor SPEC.toml")
 
 
+def _setting(spec: MotorSpec, doc: dict, displacement, result_path) -> tuple[MotorSpec, list]:
+    """The spec at the displacement setting exported (``displacement`` [m³/rev] or None) → (spec, notes).
+    A fit of a variable unit (a table with a displacement column) is the model at each point's D: it
+    exports at any setting; a fixed unit's at its own only."""
+    import dataclasses
+
+    table = doc.get("table") if isinstance(doc.get("table"), dict) else {}
+    variable = bool(table.get("variable_displacement"))
+    if displacement is None:
+        if not variable:
+            return spec, []
+        return spec, [f"the fit is of a variable unit (a displacement per point); this export is at the spec's "
+                      f"displacement, {spec.displacement * 1e6:.4g} cm3/rev: another setting with --displacement CM3"]
+    d = float(displacement)
+    if not (math.isfinite(d) and d > 0):
+        raise InputError(f"--displacement must be a positive number of cm3/rev, got {d * 1e6!r}")
+    if not variable:
+        raise InputError(f"--displacement: {result_path} is a fit of a fixed-displacement unit (its data give no "
+                         f"displacement per point): it exports at its own {spec.displacement * 1e6:.4g} cm3/rev only")
+    return dataclasses.replace(spec, displacement=d), [
+        f"at the displacement setting {d * 1e6:.4g} cm3/rev (--displacement; the variable unit's model at that D, "
+        f"as the fit took each point's)"]
+
+
 def load_identified(result_dir, motor=None, diagnosis: bool = True, assume=None, unused=(),
-                    why_unused: str = "") -> IdentifiedMotor:
+                    why_unused: str = "", displacement=None) -> IdentifiedMotor:
     """The identified motor of a fit's folder (see the module docstring).
 
     result_dir : folder holding result.json; motor : a spec TOML overriding the
@@ -136,7 +160,8 @@ def load_identified(result_dir, motor=None, diagnosis: bool = True, assume=None,
     fit did not determine (a map holds no breakaway: K_FS, K_s); unused : parameters the
     export never evaluates (taken as 0 where undetermined; ``why_unused`` says why, in the notes).
     A K_L harmonic the fit did not determine is 0, as the fit held it.  An assumed value for a
-    parameter the fit did determine is refused.
+    parameter the fit did determine is refused.  displacement : [m³/rev] the setting of a variable
+    unit to export at (None: the spec's).
     """
     undetermined = _Undetermined(assume, unused, why_unused)
     from motorid.physics.registry import get
@@ -154,10 +179,11 @@ def load_identified(result_dir, motor=None, diagnosis: bool = True, assume=None,
     spec_path = Path(motor) if motor is not None else _find_spec(doc, result_dir, result_path)
     spec = load_motor_spec(spec_path)
     _check_spec(spec, doc["motor"], spec_path, result_path)
+    spec, setting_notes = _setting(spec, doc, displacement, result_path)
 
     params = {k: _value(e, k, str(result_path), undetermined) for k, e in doc["parameters"].items()}
     mech_ids = list((doc.get("fit") or {}).get("mechanisms") or [])
-    notes = [f"parameters from {result_path}", f"motor spec and oil from {spec_path}"]
+    notes = [f"parameters from {result_path}", f"motor spec and oil from {spec_path}"] + setting_notes
 
     diag_path = result_dir / "diagnosis.json"
     if diagnosis and diag_path.is_file():
