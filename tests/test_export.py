@@ -381,3 +381,33 @@ def test_a_variable_unit_exports_at_the_setting_asked_for(tmp_path, capsys):
     assert main(["export", str(fixed), "--format", "python", "--out", str(out), "--displacement", "50", *common]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "fixed-displacement unit" in err and not out.exists()
+
+
+def test_a_relative_motor_path_run_from_elsewhere_finds_the_right_spec(tmp_path, monkeypatch, capsys):
+    """result.json names the spec as the fit was given it ('motor.toml', relative): exported from
+    another folder that holds another motor's motor.toml, that file is passed over (its geometry
+    disagrees) and the spec the table fit kept in result.json is used; a log fit, which keeps none,
+    names the disagreement in one line."""
+    from motorid.cli import main
+    from motorid.model import MotorSpec, OilSpec
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a").mkdir()
+    fitted_map(tmp_path / "a", quadrants=2, seed=5)
+    doc = json.loads((tmp_path / "a" / "fit" / "result.json").read_text())
+    doc["inputs"]["motor"] = "motor.toml"
+    (tmp_path / "a" / "fit" / "result.json").write_text(json.dumps(doc))
+    (tmp_path / "motor.toml").write_text(MotorSpec("other", 7, 28e-6, 0.001, oil=OilSpec(temp_C=40.0)).to_toml())
+    out = tmp_path / "m.py"
+    assert main(["export", str(tmp_path / "a" / "fit"), "--format", "python", "--out", str(out),
+                 "--assume", "KFS=0.015", "--assume", "Ks=1"]) == 0
+    assert "result.json motor_spec" in out.read_text()
+    log = tmp_path / "log"
+    log.mkdir()
+    demo = json.loads((DEMO / "result.json").read_text())
+    demo["inputs"]["motor"] = "motor.toml"
+    (log / "result.json").write_text(json.dumps(demo))
+    capsys.readouterr()
+    assert main(["export", str(log), "--format", "python", "--out", str(tmp_path / "l.py")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "does not match" in err and "pistons" in err

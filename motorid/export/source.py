@@ -109,19 +109,44 @@ def _check_spec(spec: MotorSpec, motor: dict, spec_path, result_path) -> None:
                          "viscosity at T_oil")
 
 
-def _find_spec(doc: dict, result_dir: Path, result_path: Path):
+def _find_spec(doc: dict, result_dir: Path, result_path: Path) -> tuple[MotorSpec, str]:
+    """The motor spec of ``doc`` → (spec, where from): the first file it may name (``inputs.motor`` as
+    written, relative to the working folder, to RESULT_DIR, then RESULT_DIR/motor.toml) whose geometry
+    agrees with result.json's — a relative name run from another folder may find another motor's
+    file, which is passed over — else the spec's TOML a table fit keeps in result.json
+    (``motor_spec``); else the first disagreement, or that none was found, in one line."""
+    import tomllib
+
+    from motorid.io.spec import parse_motor_spec
+
     named = (doc.get("inputs") or {}).get("motor")
-    tried = []
+    cands = []
     if isinstance(named, str) and named:
         p = Path(named)
-        for cand in ([p] if p.is_absolute() else [Path.cwd() / p, result_dir / p, result_dir / p.name]):
-            tried.append(str(cand))
-            if cand.is_file():
-                return cand
-    cand = result_dir / "motor.toml"
-    tried.append(str(cand))
-    if cand.is_file():
-        return cand
+        cands += [p] if p.is_absolute() else [Path.cwd() / p, result_dir / p, result_dir / p.name]
+    cands.append(result_dir / "motor.toml")
+    tried, first_error = [], None
+    for cand in dict.fromkeys(cands):
+        tried.append(str(cand))
+        if not cand.is_file():
+            continue
+        spec = load_motor_spec(cand)
+        try:
+            _check_spec(spec, doc["motor"], cand, result_path)
+        except InputError as exc:
+            first_error = first_error or exc
+            continue
+        return spec, str(cand)
+    if isinstance(doc.get("motor_spec"), str) and doc["motor_spec"].strip():
+        where = f"{result_path} motor_spec"
+        try:
+            spec = parse_motor_spec(tomllib.loads(doc["motor_spec"]), where)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"{where}: not valid TOML ({exc})") from None
+        _check_spec(spec, doc["motor"], where, result_path)
+        return spec, where
+    if first_error is not None:
+        raise first_error
     raise InputError(f"{result_path}: cannot recover the motor spec (the oil is not in result.json; looked for "
                      f"{', '.join(tried)}); give it with --motor SPEC.toml")
 
@@ -176,9 +201,12 @@ def load_identified(result_dir, motor=None, diagnosis: bool = True, assume=None,
     for key in ("parameters", "motor"):
         if not isinstance(doc.get(key), dict):
             raise InputError(f"{result_path}: missing object '{key}'")
-    spec_path = Path(motor) if motor is not None else _find_spec(doc, result_dir, result_path)
-    spec = load_motor_spec(spec_path)
-    _check_spec(spec, doc["motor"], spec_path, result_path)
+    if motor is not None:
+        spec_path = Path(motor)
+        spec = load_motor_spec(spec_path)
+        _check_spec(spec, doc["motor"], spec_path, result_path)
+    else:
+        spec, spec_path = _find_spec(doc, result_dir, result_path)
     spec, setting_notes = _setting(spec, doc, displacement, result_path)
 
     params = {k: _value(e, k, str(result_path), undetermined) for k, e in doc["parameters"].items()}
