@@ -327,7 +327,8 @@ def test_a_map_fit_exports_its_losses_and_asks_for_the_static_friction_it_lacks(
     want = spec.displacement * (p_a + p_b) * (kf + 0.012) + tfc * (1 + 0.8)  # MODEL.md: T_break
     assert float(got) == pytest.approx(want, rel=1e-9)
     # refused in one line: a parameter the fit determined; not KEY=VALUE
-    for bad, words in ((["--assume", "KF=3"], "the fit determined KF"), (["--assume", "KFS"], "KEY=VALUE")):
+    for bad, words in ((["--assume", "KF=3"], "the fit determined KF"), (["--assume", "KFS"], "KEY=VALUE"),
+                       (["--assume", "KFS=0.02"], "given twice")):
         assert main(["export", str(d), "--format", "python", "--out", str(py), "--force", "--assume", "KFS=0.012",
                      "--assume", "Ks=0.8", *bad]) == 2
         err = capsys.readouterr().err.strip()

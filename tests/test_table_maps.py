@@ -231,7 +231,7 @@ q_a_lpm   = {name = "Q_4Q", unit = "m3/s", sign = -1}
 
 def test_loss_tables_in_simscape_convention_give_back_the_motor_that_made_them(tmp_path, capsys):
     """Loss tables as a Simscape user holds them (Simscape's tabulated-loss convention:
-    T = DΔP/2π − T_loss, Q_A = Dω/2π + Q_loss), here written by ``motorid export --format simscape``
+    T = DΔP/2π − T_loss, Q_hp = ±(Dω/2π + Q_loss) at the high-pressure port), here written by ``motorid export --format simscape``
     from a map fit: read through a channel map (loss columns, [grid] axes as row vectors), fitted,
     they give back that fit's parameters; a table with a loss column and the same reading is refused."""
     from test_export import fitted_map
@@ -250,11 +250,17 @@ def test_loss_tables_in_simscape_convention_give_back_the_motor_that_made_them(t
     capsys.readouterr()
     assert main(["fit", str(tmp_path / "ss" / "simscape_losses.mat"), "--channels", str(tmp_path / "ss.toml"),
                  "--motor", str(motor), "--out", str(tmp_path / "f2")]) == 0
-    assert "Q_A = Dω/2π + Q_loss" in capsys.readouterr().out
+    assert "±(Dω/2π + Q_loss)" in capsys.readouterr().out
     first = json.loads((first_fit / "result.json").read_text())["parameters"]
     again = json.loads((tmp_path / "f2" / "result.json").read_text())["parameters"]
     for k in ("Kv", "KF", "TFc", "KL0", "KAB"):
-        assert again[k]["value"] == pytest.approx(first[k]["value"], rel=1e-6), k
+        assert again[k]["value"] == pytest.approx(first[k]["value"], rel=1e-6, abs=0), k
+    # a loss in a pump's convention is not what the loss columns mean: refused, naming the column
+    (tmp_path / "pump.toml").write_text("convention = \"pump\"\n" + (tmp_path / "ss.toml").read_text())
+    assert main(["fit", str(tmp_path / "ss" / "simscape_losses.mat"), "--channels", str(tmp_path / "pump.toml"),
+                 "--motor", str(motor), "--out", str(tmp_path / "f4")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "torque_loss_Nm" in err and "Simscape's convention" in err
     # the same quantity twice: a loss column and the reading it derives
     df.assign(torque_loss_Nm=1.0).to_csv(tmp_path / "both.csv", index=False)
     assert main(["fit", str(tmp_path / "both.csv"), "--motor", str(motor), "--out", str(tmp_path / "f3")]) == 2

@@ -43,6 +43,11 @@ def test_points_spread_over_the_range_one_per_cell(tmp_path):
     # the four quadrants keep a quarter each
     quarters = [np.sum((np.sign(s) == a) & (np.sign(dp) == b)) for a in (1, -1) for b in (1, -1)]
     assert max(quarters) - min(quarters) <= 0.1 * idx.size
+    # repeated operating points and crowded cells keep n points, not one per occupied cell
+    repeated = t.subset(np.repeat(np.arange(3), 1000))
+    assert selection_points(repeated, 300).size == 300
+    crowded = t.subset(np.r_[np.repeat(np.flatnonzero(np.abs(t.speed) < 200), 100), np.argmax(t.speed)])
+    assert selection_points(crowded, 300).size >= 290
     # two recordings (say two temperatures) keep their share each
     r = _table(tmp_path, speeds, dps, name="r.csv", recording=lambda n: np.where(np.arange(n) % 3, "hot", "cold"))
     idx = selection_points(r, 300)

@@ -55,6 +55,10 @@ def run_export(args) -> int:
             value = math.nan
         if not math.isfinite(value):
             raise InputError(f"--assume {item}: expected KEY=VALUE with a finite number, e.g. --assume KFS=0.012")
+        if key.strip() in assume:
+            raise InputError(f"--assume {key.strip()}: given twice ({assume[key.strip()]!r} and {value!r}); keep one")
+        if value < 0 and key.strip() in ("KFS", "Ks", "KF", "TFc", "Kv", "KL0", "KAB"):
+            raise InputError(f"--assume {item}: {key.strip()} is ≥ 0 in the model (MODEL.md)")
         assume[key.strip()] = value
     displacement = None if args.displacement is None else args.displacement * 1e-6
     path = export(args.result_dir, args.fmt, out, motor=args.motor, diagnosis=not args.no_diagnosis,

@@ -67,9 +67,12 @@ def selection_points(table, n: int | None = None) -> np.ndarray | None:
     it has no more than ``n``.
 
     The range (signed speed, signed ΔP, and where they vary the case pressure, log viscosity and
-    displacement, each scaled to [0, 1]) is cut into equal cells, as many per recording as ``n`` allows;
-    each occupied cell gives its point nearest the cell's centre.  Every recording keeps its share (a
-    per-recording temperature stays identifiable); nothing random: the same table gives the same points."""
+    displacement, each scaled to [0, 1]) is cut into equal cells, as many per recording as ``n`` allows.
+    Every occupied cell gives its points nearest the cell's centre, as many as an even share of ``n``
+    over the occupied cells (a map whose points crowd a few cells, or repeat one operating point, keeps
+    ``n`` of them, not one per cell); the first of every cell before any second.  Every recording keeps
+    its cells (a per-recording temperature stays identifiable); nothing random: the same table gives the
+    same points."""
     n = SELECTION_POINTS if n is None else int(n)
     N = len(table)
     if N <= n:
@@ -77,7 +80,8 @@ def selection_points(table, n: int | None = None) -> np.ndarray | None:
     cols = [np.asarray(table.speed, float), np.asarray(table.dp, float)]
     for extra in (np.asarray(table.p_case, float), np.log(np.asarray(table.viscosity, float)),
                   np.asarray(table.displacement, float)):
-        if np.ptp(extra[np.isfinite(extra)]) > 1e-9 * max(np.max(np.abs(extra[np.isfinite(extra)])), 1e-300):
+        seen = extra[np.isfinite(extra)]
+        if seen.size and np.ptp(seen) > 1e-9 * max(float(np.max(np.abs(seen))), 1e-300):
             cols.append(extra)
     X = np.column_stack(cols)
     X = np.where(np.isfinite(X), X, np.nanmedian(X, axis=0))
@@ -90,10 +94,20 @@ def selection_points(table, n: int | None = None) -> np.ndarray | None:
     cell = np.minimum(np.floor(X * bins), bins - 1)
     distance = np.sum((X * bins - cell - 0.5) ** 2, axis=1)
     key = np.column_stack([group, cell]).astype(np.int64)
-    order = np.lexsort((distance,) + tuple(key.T[::-1]))
-    first = np.ones(N, bool)
-    first[1:] = np.any(key[order][1:] != key[order][:-1], axis=1)
-    chosen = np.sort(order[first])
+    order = np.lexsort((distance,) + tuple(key.T[::-1]))  # by cell, nearest the centre first
+    new_cell = np.ones(N, bool)
+    new_cell[1:] = np.any(key[order][1:] != key[order][:-1], axis=1)
+    start = np.maximum.accumulate(np.where(new_cell, np.arange(N), 0))
+    rank = np.arange(N) - start  # 0: the point nearest its cell's centre
+    quota = int(np.ceil(n / int(new_cell.sum())))
+    keep = []
+    for r in range(quota):  # every cell's first, then its second, …, up to n; a last level taken evenly
+        level = order[rank == r]
+        need = n - sum(k.size for k in keep)
+        if level.size > need:
+            level = level[np.unique(np.round(np.linspace(0, level.size - 1, need)).astype(int))]
+        keep.append(level)
+    chosen = np.sort(np.concatenate(keep))
     return chosen if chosen.size < N else None
 
 
@@ -183,8 +197,8 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
     selection = {"points": len(table), "of": len(every)}
     if chosen is not None:  # the chosen model (and the base one) on every point
         table = every
-        base_fit = fit_table(table, spec)
-        best_fit = fit_table(table, spec, current) if current else base_fit
+        base_fit = fit_table(table, spec, **joint)
+        best_fit = fit_table(table, spec, current, **joint) if current else base_fit
     from motorid.discrepancy.table_terms import MotoridWithTerms, unexplained_table_entries
 
     unexplained = unexplained_table_entries(best_fit, spec)  # on the table's points, logs or not
@@ -224,9 +238,9 @@ def _selection_words(sel) -> dict:
         return {}
     out = {"points": sel["points"], "of_points": sel["of"]}
     if sel["points"] < sel["of"]:
-        out["points_note"] = (f"mechanisms chosen on {sel['points']} of the table's {sel['of']} points, one per cell "
-                              "of an even grid over the operating range; the chosen model fitted and compared on "
-                              "every point")
+        out["points_note"] = (f"mechanisms chosen on {sel['points']} of the table's {sel['of']} points, spread over "
+                              "the cells of an even grid over the operating range; the chosen model fitted and "
+                              "compared on every point")
     return out
 
 

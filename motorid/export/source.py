@@ -130,10 +130,10 @@ def _find_spec(doc: dict, result_dir: Path, result_path: Path) -> tuple[MotorSpe
         tried.append(str(cand))
         if not cand.is_file():
             continue
-        spec = load_motor_spec(cand)
         try:
+            spec = load_motor_spec(cand)
             _check_spec(spec, doc["motor"], cand, result_path)
-        except InputError as exc:
+        except InputError as exc:  # another motor's spec, or a stray file that is no spec: passed over
             first_error = first_error or exc
             continue
         return spec, str(cand)

@@ -76,7 +76,7 @@ COLUMNS = {
     # a data sheet's efficiencies (a fraction in the table; io/efficiency_columns.py derives torque and flow)
     "volumetric_efficiency": "efficiency", "hydromechanical_efficiency": "efficiency",
     "overall_efficiency": "efficiency",
-    # a loss table's losses, Simscape's convention (io/efficiency_columns.py derives torque and port A flow)
+    # a loss table's losses, Simscape's convention (io/efficiency_columns.py derives torque and the inlet flow)
     "torque_loss_Nm": "torque", "q_loss_lpm": "flow",
 }
 LOG_REQUIRED = ("time_s", "run_id", "protocol", "shaft_angle_deg", "speed_rpm", "torque_Nm", "p_a_bar",
@@ -85,6 +85,7 @@ TABLE_OUTPUTS = ("torque_Nm", "q_a_lpm", "q_b_lpm", "q_case_lpm")
 EFFICIENCY_OUTPUTS = ("volumetric_efficiency", "hydromechanical_efficiency", "overall_efficiency",
                       "torque_loss_Nm", "q_loss_lpm")  # outputs derived from efficiencies or losses
 PUMP_SIGN = ("torque_Nm", "q_a_lpm", "q_b_lpm")  # negated by convention = "pump"
+LOSS_OUTPUTS = ("torque_loss_Nm", "q_loss_lpm")  # Simscape's convention: refused with convention = "pump"
 FORMATS = ("csv", "text", "mat", "hdf5", "parquet", "xlsx", "tdms", "mdf")
 
 _TOP_KEYS = {"file", "convention", "channels", "constants", "absent", "extra", "grid"}
@@ -540,6 +541,10 @@ def parse_channel_map(doc: dict, path: str) -> ChannelMap:
         if column not in COLUMNS:
             raise InputError(f"{where}: unknown column (one of {', '.join(COLUMNS)}; other channels go "
                              f"under [extra])")
+        if cmap.pump and column in LOSS_OUTPUTS:
+            raise InputError(f"{where}: a loss column follows Simscape's convention in every quadrant "
+                             f"(T = DΔP/2π − T_loss), not a pump's: leave convention = \"pump\" out, or give the "
+                             f"loss its sign with sign = -1")
         cmap.channels[column] = _channel(where, column, spec)
 
     constants = doc.get("constants", {})

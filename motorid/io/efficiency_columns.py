@@ -47,17 +47,20 @@ def loss_headers(torque_units: dict, flow_units: dict) -> dict:
 
 
 def outputs_from_losses(loss: dict, speed, p_a, p_b, displacement) -> tuple[dict, list]:
-    """Loss columns → ({"torque", "q_a"} [SI, NaN where not given], words for the table's notes).
+    """Loss columns → ({"torque", "q_a", "q_b"} [SI, NaN where not given], words for the table's notes).
 
     The convention of Simscape's tabulated-loss motor blocks (and of ``motorid export --format
     simscape``), in every quadrant, with no mode switch:
 
         T   = D ΔP / 2π − T_loss          (shaft torque delivered; T_loss has the sign of ω, plus
                                            its pressure part)
-        Q_A = D ω / 2π + Q_loss           (flow into port A; Q_loss, the leakage, signed like ΔP)
+        Q_hp = ±(D ω / 2π + Q_loss)       (flow into the high-pressure port, + for A where ΔP ≥ 0,
+                                           − for B where ΔP < 0; Q_loss, the leakage, signed like ΔP)
 
+    The block has no case drain, so its inlet and outlet flows are one; a motor's are not, and the
+    loss is read, as ``motorid export --format simscape`` writes it, at the high-pressure port.
     loss : "torque" [N·m] and/or "q" [m³/s] per point (NaN where empty); speed [rad/s], pressures
-    [Pa], displacement [m³/rev] per point."""
+    [Pa], displacement [m³/rev] per point → {"torque", "q_a", "q_b"}."""
     dp = np.asarray(p_a, float) - np.asarray(p_b, float)
     w = np.asarray(speed, float)
     d = np.asarray(displacement, float)
@@ -66,8 +69,11 @@ def outputs_from_losses(loss: dict, speed, p_a, p_b, displacement) -> tuple[dict
         out["torque"] = d * dp / (2 * np.pi) - np.asarray(loss["torque"], float)
         parts.append("the torque as T = DΔP/2π − T_loss")
     if "q" in loss:
-        out["q_a"] = d * w / (2 * np.pi) + np.asarray(loss["q"], float)
-        parts.append("the flow into port A as Q_A = Dω/2π + Q_loss (Q_loss signed like ΔP)")
+        inlet = d * w / (2 * np.pi) + np.asarray(loss["q"], float)
+        out["q_a"] = np.where(dp >= 0, inlet, np.nan)
+        out["q_b"] = np.where(dp < 0, -inlet, np.nan)
+        parts.append("the flow into the high-pressure port as ±(Dω/2π + Q_loss) (Q_loss signed like ΔP: into A "
+                     "where ΔP ≥ 0, into B where ΔP < 0)")
     notes = [f"{' and '.join(parts)} from the loss columns (Simscape's tabulated-loss convention); the "
              "other port and the case drain are not in a loss column"]
     return out, notes

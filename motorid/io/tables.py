@@ -411,10 +411,11 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
             notes += [f"{path.name}: {w}" for w in words]
     losses = {k[5:]: column(k)[0] * found[k][1] for k in found if k.startswith("loss:")}
     if losses:
-        for key, c in (("torque", "torque"), ("q", "q_a")):
-            if key in losses and np.isfinite(measured[c]).any():
-                raise InputError(f"{path}: columns '{fields[found['loss:' + key][0]]}' and the {c} reading give "
-                                 f"the same quantity; keep one")
+        for key, chans in (("torque", ("torque",)), ("q", ("q_a", "q_b"))):
+            c = next((c for c in chans if key in losses and np.isfinite(measured[c]).any()), None)
+            if c is not None:
+                raise InputError(f"{path}: column '{fields[found['loss:' + key][0]]}' and another column (a "
+                                 f"{c} reading or an efficiency) give the same quantity; keep one")
         derived, words = outputs_from_losses(losses, speed, p_a, p_b, displacement)
         for c, x in derived.items():
             measured[c] = np.where(np.isfinite(x), x, np.nan)
@@ -439,7 +440,7 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
                        notes)
     empty = ~np.any([np.isfinite(measured[c]) for c in measured], axis=0)
     if require_outputs and empty.all():
-        raise InputError(f"{path}: no row holds an output reading (torque, a flow, or an efficiency)")
+        raise InputError(f"{path}: no row holds an output reading (torque, a flow, an efficiency or a loss)")
     if require_outputs and empty.any():  # a point with no reading: nothing to fit, not a point of the map
         table = table.subset(~empty)
         table.notes.append(f"{path.name}: {int(empty.sum())} row(s) with no output reading (line "

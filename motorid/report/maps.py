@@ -107,7 +107,8 @@ def plot_efficiency_maps(table, predicted: dict):
                 cs = ax.tricontourf(tri, vals, levels=lev, cmap=cmap, extend="both")
                 fig.colorbar(cs, ax=ax, shrink=0.85)
             except ValueError:  # all triangles masked, or none (points on a line): the points, coloured
-                sc = ax.scatter(x[ok], y[ok], c=vals, cmap=cmap, s=12)
+                sc = ax.scatter(x[ok], y[ok], c=vals, cmap=cmap, s=12,
+                                vmin=None if lev is None else lev[0], vmax=None if lev is None else lev[-1])
                 fig.colorbar(sc, ax=ax, shrink=0.85)
             if ok.sum() <= MARKED_POINTS:  # a dense grid's markers would cover the colours
                 ax.plot(x[ok], y[ok], ".", color="k", ms=2)
@@ -240,8 +241,8 @@ def render_map_report(doc: dict, tf, diagnosis: dict | None = None) -> str:
                        f"measured, predicted by the fitted model at the same points, and measured − predicted. "
                        f"{_esc(facts)}.</figcaption></figure>")
     if len(settings) > MAX_SETTINGS and figures:
-        figures.append(f"<p>{len(settings)} displacement settings in the table: the {MAX_SETTINGS} largest are "
-                       f"drawn.</p>")
+        figures.append(f"<p>{len(settings)} displacement settings in the table: maps of {len(figures)} of the "
+                       f"{MAX_SETTINGS} largest are drawn.</p>")
     maps = "\n".join(figures) or ('<p class="missing">No efficiency can be formed: the table lacks torque or the '
                                    'port flows.</p>')
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
