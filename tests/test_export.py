@@ -333,6 +333,11 @@ def test_a_map_fit_exports_its_losses_and_asks_for_the_static_friction_it_lacks(
                      "--assume", "Ks=0.8", *bad]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and words in err
+    # below the bound the model keeps (K_FS ≥ 0): refused, nothing written
+    assert main(["export", str(d), "--format", "python", "--out", str(tmp_path / "neg.py"), "--assume", "KFS=-0.01",
+                 "--assume", "Ks=0.8"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "KFS is ≥ 0" in err and not (tmp_path / "neg.py").exists()
 
 
 def test_a_variable_unit_exports_at_the_setting_asked_for(tmp_path, capsys):

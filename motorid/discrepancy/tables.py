@@ -7,7 +7,6 @@ import math
 import numpy as np
 
 
-
 def _profile_bic(tf) -> float:
     """BIC of a table fit with each channel's noise level profiled out:
     Σ_c [n_c ln(RSS_c / n_c) + 2 Σ_i ln w_i] + k ln n (Gaussian likelihood, σ_i = s_c w_i with w_i

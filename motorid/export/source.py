@@ -56,7 +56,17 @@ class _Undetermined:
     naming the parameter and the option.  Each choice is written into the export's notes."""
 
     def __init__(self, assume=None, unused=(), why_unused: str = ""):
+        from motorid.model import parameter_info
+        from motorid.physics.registry import all_mechanisms
+
         self.assume = {str(k): float(v) for k, v in (assume or {}).items()}
+        for k, v in self.assume.items():  # a parameter the model keeps ≥ 0 (MODEL.md) is not assumed below 0
+            try:
+                positive = parameter_info(k, all_mechanisms()).positive
+            except KeyError:  # not a parameter at all: said once the result is read
+                positive = False
+            if positive and v < 0:
+                raise InputError(f"--assume {k}={v:g}: {k} is ≥ 0 in the model (MODEL.md)")
         self.unused, self.why_unused = set(unused), why_unused
         self.notes: list = []
         self.used_assumptions: set = set()
@@ -115,9 +125,7 @@ def _find_spec(doc: dict, result_dir: Path, result_path: Path) -> tuple[MotorSpe
     agrees with result.json's — a relative name run from another folder may find another motor's
     file, which is passed over — else the spec's TOML a table fit keeps in result.json
     (``motor_spec``); else the first disagreement, or that none was found, in one line."""
-    import tomllib
-
-    from motorid.io.spec import parse_motor_spec
+    from motorid.io.spec import parse_stored_spec
 
     named = (doc.get("inputs") or {}).get("motor")
     cands = []
@@ -139,10 +147,7 @@ def _find_spec(doc: dict, result_dir: Path, result_path: Path) -> tuple[MotorSpe
         return spec, str(cand)
     if isinstance(doc.get("motor_spec"), str) and doc["motor_spec"].strip():
         where = f"{result_path} motor_spec"
-        try:
-            spec = parse_motor_spec(tomllib.loads(doc["motor_spec"]), where)
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"{where}: not valid TOML ({exc})") from None
+        spec = parse_stored_spec(doc["motor_spec"], where)
         _check_spec(spec, doc["motor"], where, result_path)
         return spec, where
     if first_error is not None:

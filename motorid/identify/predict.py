@@ -47,7 +47,7 @@ def load_result(result_dir, spec=None):
 
     The spec comes from ``spec`` where given, else from the document's ``motor_spec``
     (the spec's TOML, written by ``motorid fit``), else from the ``inputs.motor`` path."""
-    from motorid.io.spec import load_motor_spec, parse_motor_spec
+    from motorid.io.spec import load_motor_spec, parse_stored_spec
 
     path = Path(result_dir)
     f = path / "result.json" if path.is_dir() else path
@@ -61,9 +61,7 @@ def load_result(result_dir, spec=None):
         raise InputError(f"{f}: not a motorid result (no 'parameters')")
     if spec is None:
         if doc.get("motor_spec"):
-            import tomllib
-
-            spec = parse_motor_spec(tomllib.loads(doc["motor_spec"]), f"{f} motor_spec")
+            spec = parse_stored_spec(doc["motor_spec"], f"{f} motor_spec")
         elif doc.get("inputs", {}).get("motor") and Path(doc["inputs"]["motor"]).exists():
             spec = load_motor_spec(doc["inputs"]["motor"])
         else:

@@ -62,3 +62,15 @@ def parse_motor_spec(data: dict, source: str = "motor spec") -> MotorSpec:
 def load_motor_spec(path) -> MotorSpec:
     """Read and validate a motor spec TOML file."""
     return parse_motor_spec(read_toml(path, "motor spec"), str(Path(path)))
+
+
+def parse_stored_spec(text: str, where: str) -> MotorSpec:
+    """The motor spec a result.json keeps as TOML text (``motor_spec``, written by a table fit);
+    ``where`` names it in errors (one line)."""
+    import tomllib
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{where}: not valid TOML ({exc})") from None
+    return parse_motor_spec(data, where)

@@ -193,7 +193,7 @@ def _map_table_columns(path: Path, fields: list):
         elif norm in EFFICIENCY_HEADERS:  # a data sheet's efficiencies: torque and flow derived from them
             key, scale = EFFICIENCY_HEADERS[norm]
             put("eff:" + key, j, scale, name)
-        elif norm in _LOSS_HEADERS:  # a loss table's T_loss, Q_loss: torque and port A flow derived from them
+        elif norm in _LOSS_HEADERS:  # a loss table's T_loss, Q_loss: torque and the inlet flow derived from them
             key, factor = _LOSS_HEADERS[norm]
             put("loss:" + key, j, factor, name)
         elif norm.startswith("displacement_") and norm[len("displacement_"):] in _DISPLACEMENT_UNITS:
@@ -411,14 +411,13 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
             notes += [f"{path.name}: {w}" for w in words]
     losses = {k[5:]: column(k)[0] * found[k][1] for k in found if k.startswith("loss:")}
     if losses:
-        for key, chans in (("torque", ("torque",)), ("q", ("q_a", "q_b"))):
-            c = next((c for c in chans if key in losses and np.isfinite(measured[c]).any()), None)
-            if c is not None:
+        derived, words = outputs_from_losses(losses, speed, p_a, p_b, displacement)
+        for c in derived:
+            if np.isfinite(measured[c]).any():
+                key = "torque" if c == "torque" else "q"
                 raise InputError(f"{path}: column '{fields[found['loss:' + key][0]]}' and another column (a "
                                  f"{c} reading or an efficiency) give the same quantity; keep one")
-        derived, words = outputs_from_losses(losses, speed, p_a, p_b, displacement)
-        for c, x in derived.items():
-            measured[c] = np.where(np.isfinite(x), x, np.nan)
+        measured.update(derived)
         notes += [f"{path.name}: {w}" for w in words]
     stall = np.isfinite(measured["torque"]) & (np.abs(speed) < STALL_SPEED)
     if stall.any():  # a held shaft's torque is anywhere within its static friction: no running law

@@ -39,6 +39,13 @@ def pump_mode_share(direction, dp, scale=MODE_SMOOTHING):
 MIN_POINTS_PER_MODE = 4
 
 
+def mode_counts(direction, dp) -> tuple[int, int]:
+    """(pump-mode, motor-mode) samples or points: |ΔP| > 4 bar against, or with, the direction of
+    rotation (sgn ω)."""
+    power = np.asarray(direction, float) * np.asarray(dp, float)
+    return int(np.count_nonzero(power < -4.0 * MODE_SMOOTHING)), int(np.count_nonzero(power > 4.0 * MODE_SMOOTHING))
+
+
 class PumpModeFriction(CatalogMechanism):
     """A pressure-proportional friction that differs in pump mode [N·m].
 
@@ -92,17 +99,13 @@ class PumpModeFriction(CatalogMechanism):
         direction of rotation) and motor-mode ones (with it); diagnose does not try the mechanism
         where it lacks either: with pump mode alone ΔK_F is K_F in other words."""
         s = dataset.running
-        power = np.asarray(s.direction) * (np.asarray(s.p_a) - np.asarray(s.p_b))
-        return bool(np.count_nonzero(power < -4.0 * MODE_SMOOTHING) >= 20
-                    and np.count_nonzero(power > 4.0 * MODE_SMOOTHING) >= 20)
+        return min(mode_counts(s.direction, np.asarray(s.p_a) - np.asarray(s.p_b))) >= 20
 
     def unseen_in_table(self, table) -> str | None:
         """A table needs points of both modes (|ΔP| > 4 bar): on points of one mode alone the
         change from one mode to the other is the friction coefficient K_F itself (on a pump's map,
         the pump-mode law is the only law)."""
-        power = np.sign(np.asarray(table.speed, float)) * np.asarray(table.dp, float)
-        pump = int(np.count_nonzero(power < -4.0 * MODE_SMOOTHING))
-        motor = int(np.count_nonzero(power > 4.0 * MODE_SMOOTHING))
+        pump, motor = mode_counts(np.sign(np.asarray(table.speed, float)), table.dp)
         if min(pump, motor) >= MIN_POINTS_PER_MODE:
             return None
         return (f"the table holds {pump} pump-mode and {motor} motor-mode points: a friction law that differs "
