@@ -147,12 +147,23 @@ class _FittedMotorid:
         ch = point_channels(p, o.spec, angle_samples(o.spec, table, mechanisms, p), disp, mechanisms)
         out = dict(zip(CHANNELS, (np.asarray(v) for v in ch)))
         ls = self.fit.ls
-        # a channel whose parameters the training points did not identify is not predicted
-        needs = {"torque": ("Kv", "KF", "TFc"), "q_a": ("KL0",), "q_b": ("KL0",), "q_case": ("KL0",)}
-        for c, ks in needs.items():
-            if any(not ls.identifiable.get(k, True) for k in ks):
-                out[c] = np.full(len(table), np.nan)
+        for c in not_predicted(ls.identifiable):
+            out[c] = np.full(len(table), np.nan)
         return out
+
+
+#: the parameters each channel needs identified before it is predicted
+PREDICTION_NEEDS = {"torque": ("Kv", "KF", "TFc"), "q_a": ("KL0",), "q_b": ("KL0",), "q_case": ("KL0",)}
+
+
+def not_predicted(identifiable: dict) -> dict:
+    """channel → the parameter it needs that the fit did not identify (a channel not predicted)."""
+    out = {}
+    for c, ks in PREDICTION_NEEDS.items():
+        missing = [k for k in ks if not identifiable.get(k, True)]
+        if missing:
+            out[c] = missing[0]
+    return out
 
 
 def compare(table, spec, comparators=None, mechanisms=(), k: int = 5, motorid_model=None) -> dict:

@@ -164,3 +164,27 @@ def one_back_pressure_warning(low_port_pressure, kf) -> str:
             f"K_F cannot be told from a gain error of the torque transducer, which it takes as g/2π (a 1 % "
             f"gain error moves K_F by 0.0016{share}), and its std does not include it; runs at a second back "
             f"pressure tell them apart")
+
+
+#: a channel's parameters take at most this share of its Jacobian's largest singular value and still
+#: count as determined by it (they use up its degrees of freedom)
+RANK_TOL = 1e-3
+#: a table channel's noise resting on fewer degrees of freedom than this is reported as rough
+ROUGH_NOISE_DOF = 3
+
+
+def channel_parameters(J: np.ndarray, free: list, row: int, n_pad: int) -> tuple:
+    """(rank, names): how many directions of the free parameters the table channel whose rows start
+    at ``row * n_pad`` determines, and the parameters that reach it (columns scaled to unit norm
+    over the whole Jacobian, so that the count does not depend on units)."""
+    block = np.asarray(J[row * n_pad:(row + 1) * n_pad], float)
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    block = block / norms
+    if block.size == 0:
+        return 0, []
+    s = np.linalg.svd(block, compute_uv=False)
+    rank = int(np.sum(s > RANK_TOL * max(float(s.max()), 1e-300)))
+    reach = np.linalg.norm(block, axis=0)
+    names = [k for k, v in zip(free, reach) if v > RANK_TOL * max(float(reach.max()), 1e-300)]
+    return rank, names

@@ -67,12 +67,50 @@ def load_campaign(paths: Sequence, spec, channels=None, *, cells: bool | None = 
         reduce = lambda runs: extract_cells(runs, spec, bins_per_pitch=bins_per_pitch,  # noqa: E731
                                             outlier_sigma=outlier_sigma, progress=progress)
         try:
-            return None, reduce(stream_runs(paths, spec, channels, progress=progress))
+            frame, dataset = None, reduce(stream_runs(paths, spec, channels, progress=progress))
         except StreamFallback:  # interleaved runs or a cell to name: read whole (docs/large-logs.md)
             frame = read_logs(paths, spec, channels)
-            return None, reduce(runs_of_frame(frame))
-    frame = read_logs(paths, spec, channels)
-    return frame, extract(frame, spec)
+            frame, dataset = None, reduce(runs_of_frame(frame))
+    else:
+        frame = read_logs(paths, spec, channels)
+        dataset = extract(frame, spec)
+    check_logs_against_ideal(dataset, spec, paths)
+    return frame, dataset
+
+
+class _SteadySamples:
+    """The logs' steady samples as the table checks read a table (SI)."""
+
+    def __init__(self, dataset, spec):
+        s = dataset.running
+        self.speed, self.p_a, self.p_b = (np.asarray(getattr(s, k), float) for k in ("speed", "p_a", "p_b"))
+        self.dp = self.p_a - self.p_b
+        self.displacement = np.full(self.speed.shape, float(spec.displacement))
+        self.measured = {c: np.asarray(dataset.measured[c], float) for c in ("torque", "q_a", "q_b")}
+
+    def __len__(self) -> int:
+        return int(self.speed.size)
+
+
+def check_logs_against_ideal(dataset, spec, paths) -> None:
+    """The ideal-machine checks of a table (:func:`motorid.io.table_checks.check_against_ideal`: the port
+    flows against D·ω/2π, the torque against D·ΔP/2π, the power balance) on the logs' steady samples:
+    a channel map's forgotten sign or wrong unit factor refused in one line naming the logs, not
+    fitted into K_L and K_F."""
+    from pathlib import Path
+
+    from motorid.errors import InputError
+    from motorid.io.table_checks import check_against_ideal
+
+    if dataset.running is None or not dataset.n_running:
+        return
+    try:
+        check_against_ideal(_SteadySamples(dataset, spec), "logs")
+    except InputError as exc:
+        names = ", ".join(Path(p).name for p in paths[:3]) + (f" (and {len(paths) - 3} more)" if len(paths) > 3
+                                                              else "")
+        raise InputError(str(exc).replace("logs: ", f"{names}: the steady samples' ", 1)
+                         .replace(" points", " samples")) from None
 
 
 def viscosity_model_warning(frame, dataset, ls) -> str:

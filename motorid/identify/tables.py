@@ -44,11 +44,13 @@ import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
 from motorid import model
-from motorid.identify.identifiability import (coverage_reasons, one_back_pressure_warning, relative_spread,
+from motorid.identify.identifiability import (ROUGH_NOISE_DOF, channel_parameters, coverage_reasons,
+                                              one_back_pressure_warning, relative_spread,
                                               single_pressure_sum_reason, tfc_carries_kf_warning)
 from motorid.identify.results import operating_ranges
 from motorid.identify.table_model import (THETA_POINTS, angle_points, angle_samples,  # noqa: F401
                                           bind_mechanisms, point_channels, table_samples)
+from motorid.errors import InputError
 from motorid.identify.types import FitResult
 
 TABLE_CHANNELS = ("torque", "q_a", "q_b", "q_case")
@@ -313,6 +315,11 @@ def _best_data_start(problem, free, values, mechanisms, table, train, w_table, w
     return values if best is None else best[1]
 
 
+def _table_files(table) -> str:
+    files = sorted({str(f) for f in np.asarray(table.file)})
+    return files[0] if len(files) == 1 else f"{files[0]} (and {len(files) - 1} more)"
+
+
 def noise_floor_and_scale(residuals, relative, dof_factor: float = 1.0, start: float | None = None):
     """(σ_floor, s) [unit of the residuals] maximizing the Gaussian likelihood of ``residuals``
     with σ_i² = σ_floor² + (s · relative_i)²; ``dof_factor`` (n/dof ≥ 1) inflates the squared
@@ -374,6 +381,8 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         start.update({k: v for k, v in log_fit.params_all.items() if v is not None and k in names})
     free = [k for k in names if k not in reasons]
     has = {c: np.isfinite(table.measured[c]) & train for c in TABLE_CHANNELS}
+    whole = bool(np.all(train))  # not a fold's training points (a fold too small is the comparison's to say)
+    rough: set = set()
     sigma_c = {c: _initial_sigma(table.measured[c][has[c]]) for c in TABLE_CHANNELS}
     if fixed_noise:
         sigma_c.update({c: v for c, v in fixed_noise.items() if v})
@@ -433,12 +442,25 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         # the noise level of each channel from the residuals (degrees of freedom shared out by count)
         pred = {c: np.asarray(v) for c, v in prob.table_pred(x).items()}
         n_all = sum(int(has[c].sum()) for c in TABLE_CHANNELS) + sum(int((w > 0).sum()) for w in w_logs.values())
-        for c in TABLE_CHANNELS:
+        n_pad = len(prob.obs["torque"])
+        for i, c in enumerate(TABLE_CHANNELS):
             k = int(has[c].sum())
             if k == 0:
                 continue
             tiny = 1e-12 * max(np.max(np.abs(table.measured[c][has[c]])), 1e-300)
             dof = max(k - len(free) * k / max(n_all, 1), 1.0)
+            if not w_logs and free:  # the table alone: the channel's own parameters use up its points
+                rank, reach = channel_parameters(J, free, i, n_pad)
+                own = k - rank
+                if own < 1 and whole:
+                    raise InputError(
+                        f"{_table_files(table)}: {k} point{'s' * (k != 1)} with {c} for the {rank} parameter"
+                        f"{'s' * (rank != 1)} it determines ({', '.join(reach)}): nothing is left to estimate "
+                        f"its noise and so their uncertainty; give at least {rank + 1} points with {c}")
+                if own < ROUGH_NOISE_DOF and whole:
+                    rough.add(f"the {c} noise rests on {own} degree{'s' * (own != 1)} of freedom ({k} points, "
+                              f"{rank} parameter{'s' * (rank != 1)}): its standard errors are rough")
+                dof = max(min(dof, own), 1.0)
             if table.weights_from.get(c, "none") != "none" and k >= 10:
                 floor, scale = noise_floor_and_scale((table.measured[c] - pred[c])[has[c]],
                                                      table.relative_sigma[c][has[c]], k / dof, sigma_c[c])
@@ -501,6 +523,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         note = one_back_pressure_warning(np.minimum(table.p_a, table.p_b)[tq], values["KF"])
         if note:
             warnings.append(note)
+    warnings += sorted(rough)
     warnings += list(getattr(table, "notes", []))
     resid = {c: table.measured[c] - pred[c] for c in TABLE_CHANNELS}
     sig = {c: point_sigma(c) for c in TABLE_CHANNELS}

@@ -154,8 +154,10 @@ _QUANTITIES = [
     _Quantity("q_a_m3_s", "port A flow", "q_a_lpm", ("q_a",), _FLOW_UNITS),
     _Quantity("q_b_m3_s", "port B flow", "q_b_lpm", ("q_b",), _FLOW_UNITS),
     _Quantity("q_case_m3_s", "case drain flow", "q_case_lpm", ("q_case",), _FLOW_UNITS),
+    # the names benches give it (T_oil_C, temp_C, Temperature [°C]); the format's own wins where both are
     _Quantity("oil_temp_C", "oil temperature", "oil_temp_C",
-              ("oil_temp", "oil_temperature"), _TEMPERATURE_UNITS),
+              ("oil_temp", "oil_temperature", "t_oil", "oil_t", "temp", "temperature", "fluid_temp",
+               "fluid_temperature"), _TEMPERATURE_UNITS),
     _Quantity("viscosity_Pa_s", "oil viscosity", "viscosity_mPas", ("viscosity", "oil_viscosity", "mu"),
               _VISCOSITY_UNITS),
 ]
@@ -180,6 +182,19 @@ def normalize_header(name: str) -> str:
 
 # the column each quantity has in BENCH_LOG_FORMAT.md (normalized)
 _FORMAT_HEADER = {q.si: normalize_header(q.example) for q in _QUANTITIES}
+
+
+#: absolute-pressure units: a channel map converts them (its ``absolute``); the columns are gauge
+_ABSOLUTE_SUFFIXES = ("psia", "bara", "bar_a", "kpaa", "kpa_a", "mpaa", "mpa_a", "pa_a")
+
+
+def unknown_unit_words(name: str, q) -> str:
+    """Why column ``name`` (which seems to be quantity ``q``) is not read, in words."""
+    norm = normalize_header(name)
+    if q.si.startswith("p_") and norm.endswith(_ABSOLUTE_SUFFIXES):
+        return (f"column '{name}' is an absolute pressure; the columns are gauge: read the file through a "
+                f"channel map whose channel says unit = \"psia\" or \"bara\" (docs/formats.md)")
+    return f"column '{name}' has no unit suffix that motorid knows"
 
 
 def _unit_hint(norm: str):
@@ -279,7 +294,7 @@ def _map_columns(path: Path, fields: list):
             what = f"'{q.example}' ({q.words}, any unit suffix such as {q.hint})"
             hints = [fields[j] for j in extras if _unit_hint(normalize_header(fields[j])) is q]
             if hints:
-                what += f"; column '{hints[0]}' has no unit suffix that motorid knows"
+                what += "; " + unknown_unit_words(hints[0], q)
         else:
             what = f"'{key}'"
         names = [_BY_SI[k].example if k in _BY_SI else k for k in missing[1:]]

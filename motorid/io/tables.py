@@ -25,7 +25,12 @@ from motorid.errors import InputError
 from motorid.io.efficiency_columns import HEADERS as EFFICIENCY_HEADERS, outputs_from_efficiencies
 from motorid.io.efficiency_columns import loss_headers, outputs_from_losses
 from motorid.io.logs import (_BY_SI, _FLOW_UNITS, _HEADERS, _PRESSURE_UNITS, _TORQUE_UNITS,
-                          _oil_viscosity, _parse_body, _read_text, _split_header, _unit_hint, normalize_header)
+                          _oil_viscosity, _parse_body, _read_text, _split_header, _unit_hint, normalize_header,
+                          unknown_unit_words, _FORMAT_HEADER)
+
+#: a median oil temperature above this [°C] is told as a probable °F column (mineral hydraulic oil runs
+#: below about 90 °C; ISO 4409 tests at 50 °C)
+HOT_OIL_C = 110.0
 
 #: the outputs a table may give, SI column of the logs → channel name of the fit
 OUTPUTS = {"torque_Nm": "torque", "q_a_m3_s": "q_a", "q_b_m3_s": "q_b", "q_case_m3_s": "q_case"}
@@ -175,7 +180,12 @@ def _map_table_columns(path: Path, fields: list):
 
     def put(key, j, unit, name):
         if key in found:
-            raise InputError(f"{path}: columns '{fields[found[key][0]]}' and '{name}' give the same quantity; keep one")
+            other = fields[found[key][0]]
+            own = _FORMAT_HEADER.get(key)  # the format's own column wins over another name of its quantity
+            if own is not None and normalize_header(other) == own and normalize_header(name) != own:
+                return
+            if own is None or normalize_header(name) != own:
+                raise InputError(f"{path}: columns '{other}' and '{name}' give the same quantity; keep one")
         found[key] = (j, unit)
 
     for j, name in enumerate(fields):
@@ -212,9 +222,13 @@ def _map_table_columns(path: Path, fields: list):
         q = _unit_hint(norm) if j not in used and norm and "_std" not in norm else None
         if q is not None and any(norm.endswith("_" + normalize_header(u)) for u in q.units):
             q = None  # 'torque_setpoint_Nm', 'q_b_set_lpm': a known unit, a channel of its own (kept, ignored)
-        if q is not None and q.si in OUTPUTS and q.si not in found:
-            raise InputError(f"{path}: column '{name}' seems to be the {q.words}, but its unit suffix is not one "
-                             f"motorid knows (such as {q.hint}): rename it, or read the file with a channel map")
+        given = q is not None and (q.si in found or (q.si in ("p_a_Pa", "p_b_Pa") and "dp_Pa" in found))
+        if q is not None and (q.si in OUTPUTS or q.si in _INPUT_SI) and not given:
+            words = unknown_unit_words(name, q)
+            if words.endswith("knows"):
+                words = (f"column '{name}' seems to be the {q.words}, but its unit suffix is not one motorid knows "
+                         f"(such as {q.hint}): rename it, or read the file with a channel map")
+            raise InputError(f"{path}: {words}")
     if "speed_rad_s" not in found:
         raise InputError(f"{path}: missing required column 'speed_rpm' (shaft speed, any unit suffix such as "
                          f"_rpm, _rad_s)")
@@ -300,12 +314,18 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
                              f"with absolute = true)")
 
     temperature = np.full(n, np.nan)
+    hot_note = None
     if "oil_temp_C" in found:
         temperature = convert("oil_temp_C", column("oil_temp_C")[0])
         if np.any(temperature < -273.15):
             i = int(np.flatnonzero(temperature < -273.15)[0])
             raise InputError(f"{path}: column '{fields[found['oil_temp_C'][0]]}', line {lines[i]}: "
                              f"temperature below absolute zero")
+        hot = float(np.nanmedian(temperature)) if np.isfinite(temperature).any() else np.nan
+        if hot > HOT_OIL_C:  # a °F column under a °C name reads 50 °C as 122 °C, a viscosity 7× too low
+            hot_note = (f"column '{fields[found['oil_temp_C'][0]]}': oil at {hot:.0f} °C in the median, hotter than "
+                        f"hydraulic oil is run; if the column is in °F ({(hot - 32) * 5 / 9:.0f} °C), name it "
+                        "oil_temp_F")
     mu = np.full(n, np.nan)
     oil = getattr(spec, "oil", None)
     if "viscosity_Pa_s" in found:
@@ -389,7 +409,7 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
     else:
         ids = np.array([f"{path.name}:{k}" for k in lines], dtype=object)
         has_id = False
-    notes = []
+    notes = [] if hot_note is None else [f"{path.name}: {hot_note}"]
     effs = {k[4:]: column(k)[0] * found[k][1] for k in found if k.startswith("eff:")}
     if effs:
         if "t" in effs and len(effs) == 1:
@@ -409,6 +429,12 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
                 used = True
         if used:
             notes += [f"{path.name}: {w}" for w in words]
+            power = (p_a - p_b) * speed
+            if not (power < 0).any() and not any(k in found for k in OUTPUTS):
+                # an efficiency has no sign: a pump's sheet in the pump's own signs reads as a motor's
+                notes.append(f"{path.name}: every point read in motor mode (ΔP·ω > 0, motorid's signs); the "
+                             "efficiencies carry no sign to check it by: a pump's data sheet in its own signs "
+                             "needs a channel map with convention = \"pump\" (docs/formats.md)")
     losses = {k[5:]: column(k)[0] * found[k][1] for k in found if k.startswith("loss:")}
     if losses:
         derived, words = outputs_from_losses(losses, speed, p_a, p_b, displacement)

@@ -81,7 +81,17 @@ def plot_efficiency_maps(table, predicted: dict):
     facts = {}
     for r, (k, sym) in enumerate(rows):
         ok = np.isfinite(meas[k]) & np.isfinite(pred[k])
-        if ok.sum() < 4:
+        if ok.sum() < 4:  # measured only: the fit does not predict what it is formed from
+            only = np.isfinite(meas[k])
+            sc = axes[r, 0].scatter(x[only], y[only], c=meas[k][only], cmap="viridis", s=12)
+            fig.colorbar(sc, ax=axes[r, 0], shrink=0.85)
+            axes[r, 0].set_title(f"{sym} measured")
+            axes[r, 0].set_xlabel("ΔP = P_A − P_B [bar]")
+            axes[r, 0].set_ylabel("speed [rpm]")
+            for c in (1, 2):
+                axes[r, c].text(0.5, 0.5, f"{sym} not predicted", ha="center", va="center",
+                                transform=axes[r, c].transAxes)
+                axes[r, c].set_axis_off()
             continue
         try:
             tri = mtri.Triangulation(x[ok], y[ok])
@@ -218,16 +228,21 @@ def _diagnosis_beside(out_dir) -> dict | None:
 def render_map_report(doc: dict, tf, diagnosis: dict | None = None) -> str:
     """The report page of a fit with operating-point tables (``diagnosis``: diagnose's document,
     where it was run)."""
+    from motorid.comparators.evaluate import not_predicted
     from motorid.report.html import CSS
 
     motor = doc.get("motor", {})
     t = doc.get("table", {})
     settings = displacement_settings(tf.table)
+    unpredicted = not_predicted({k: bool(v.get("identifiable", True)) for k, v in (doc.get("parameters") or {}).items()
+                                 if isinstance(v, dict)})
     figures = []
     for idx in settings[:MAX_SETTINGS]:
         sub = tf.table if len(settings) == 1 else tf.table.subset(idx)
         pred = tf.table_prediction if len(settings) == 1 else {
             c: np.asarray(v)[idx] for c, v in tf.table_prediction.items()}
+        # a channel the fit cannot predict (a parameter it needs not identified) is not drawn as predicted
+        pred = {c: (np.full(len(sub), np.nan) if c in unpredicted else np.asarray(v)) for c, v in pred.items()}
         plot = plot_efficiency_maps(sub, pred)
         if plot is None:
             continue
@@ -245,6 +260,10 @@ def render_map_report(doc: dict, tf, diagnosis: dict | None = None) -> str:
                        f"{MAX_SETTINGS} largest are drawn.</p>")
     maps = "\n".join(figures) or ('<p class="missing">No efficiency can be formed: the table lacks torque or the '
                                    'port flows.</p>')
+    if unpredicted:
+        maps = ("<p>Not predicted: " + "; ".join(f"{c} (it needs {k}, which the fit did not identify)"
+                                                  for c, k in unpredicted.items())
+                + ". The efficiencies formed from it are drawn as measured only.</p>\n" + maps)
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              f"<title>motorid map report: {_esc(motor.get('name', 'motor'))}</title>", f"<style>{CSS}</style>",
              "</head><body>", f"<h1>motorid map report: {_esc(motor.get('name', 'motor'))}</h1>",

@@ -1,0 +1,144 @@
+"""A new user's slips that gave a wrong answer with exit 0 (a second reader playing a pump maker's
+and another lab's engineer, stop 37): each is now refused in one line or told in a warning.
+
+- a table of as many points as the parameters a channel determines: its noise, and so every
+  standard error, came out 0 (Kv 12 % off at 5·10⁸ σ);
+- an oil temperature under a bench's own name (``T_oil_C``, ``Temperature [°C]``) was dropped in
+  silence and the spec's temperature taken (Kv 11 % off);
+- °F values under a °C name (122 "°C": Kv 7× off);
+- a pump's efficiency data sheet in the pump's own signs read as a motor's (nothing to check it by);
+- the report drew a "predicted" η_v where the fit does not predict the flow (K_L0 and K_AB apart);
+- a log's channel map with a forgotten sign or a unit 60× off (refused on tables, fitted on logs).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from conftest import DEMO_TRUTH, REPO, map_motor_toml
+from motorid.errors import InputError
+
+
+@pytest.fixture
+def made(tmp_path):
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.io.spec import load_motor_spec
+
+    (tmp_path / "motor.toml").write_text(map_motor_toml(50.0))
+    spec = load_motor_spec(tmp_path / "motor.toml")
+    df = simulate_map(spec, DEMO_TRUTH, map_grid([300, 1000, 2000], [50, 150, 250], 4), temp_C=50.0,
+                      noise={"torque_Nm": 0.1, "q_a_lpm": 0.02, "q_b_lpm": 0.02, "q_case_lpm": 0.01},
+                      rng=np.random.default_rng(5))
+    return tmp_path, spec, df
+
+
+def test_a_channel_with_no_points_left_for_its_noise_is_refused_and_a_few_more_are_rough(made):
+    from motorid.identify.tables import fit_table
+    from motorid.io.tables import read_table
+
+    d, spec, df = made
+    motor = df[(df.speed_rpm > 0) & (df.p_a_bar > df.p_b_bar)]
+    spread = motor[(motor.speed_rpm == 300) & (motor.p_a_bar - motor.p_b_bar == 50) |
+                   (motor.speed_rpm == 1000) & (motor.p_a_bar - motor.p_b_bar == 150) |
+                   (motor.speed_rpm == 2000) & (motor.p_a_bar - motor.p_b_bar == 250)]
+    assert len(spread) == 3
+    spread.to_csv(d / "three.csv", index=False)
+    with pytest.raises(InputError, match=r"three\.csv: 3 points with torque for the 3 parameters it determines "
+                                         r"\(Kv, KF, TFc\).*at least 4 points with torque"):
+        fit_table(read_table(d / "three.csv", spec), spec)
+    pd.concat([spread, motor[~motor.index.isin(spread.index)].iloc[:2]]).to_csv(d / "five.csv", index=False)
+    fit = fit_table(read_table(d / "five.csv", spec), spec)
+    assert any("torque noise rests on 2 degrees of freedom" in w for w in fit.ls.warnings), fit.ls.warnings
+    assert all(fit.ls.std[k] > 0 for k in ("Kv", "KF", "TFc"))
+    whole = fit_table(read_table(_csv(d, df, "all.csv"), spec), spec)  # 36 points: no such word
+    assert not any("degrees of freedom" in w for w in whole.ls.warnings)
+
+
+def _csv(d, df, name):
+    df.to_csv(d / name, index=False)
+    return d / name
+
+
+def test_an_oil_temperature_under_a_benchs_own_name_is_read_and_one_without_unit_refused(made):
+    from motorid.io.tables import read_table
+
+    d, spec, df = made
+    hot = df.assign(oil_temp_C=np.where(np.arange(len(df)) % 2, 40.0, 60.0))
+    want = read_table(_csv(d, hot, "own.csv"), spec).temperature
+    for name in ("T_oil_C", "Temperature [°C]", "temp_C"):
+        t = read_table(_csv(d, hot.rename(columns={"oil_temp_C": name}), "alias.csv"), spec)
+        np.testing.assert_allclose(t.temperature, want)
+    # the format's own column wins over another name of it (an ambient reading, say)
+    t = read_table(_csv(d, hot.assign(temp_C=20.0), "both.csv"), spec)
+    np.testing.assert_allclose(t.temperature, want)
+    with pytest.raises(InputError, match=r"column 'T_oil' seems to be the oil temperature, but its unit suffix"):
+        read_table(_csv(d, hot.rename(columns={"oil_temp_C": "T_oil"}), "nounit.csv"), spec)
+    with pytest.raises(InputError, match=r"column 'p_a_bara' is an absolute pressure; the columns are gauge: "
+                                         r"read the file through a channel map"):
+        read_table(_csv(d, hot.rename(columns={"p_a_bar": "p_a_bara"}), "abs.csv"), spec)
+    f = hot.assign(oil_temp_C=hot.oil_temp_C * 9 / 5 + 32)  # °F under a °C name
+    notes = read_table(_csv(d, f, "f.csv"), spec).notes
+    assert any("oil at 122 °C in the median" in n and "oil_temp_F" in n for n in notes), notes
+    assert not any("hotter than" in n for n in read_table(d / "own.csv", spec).notes)
+
+
+def test_an_efficiency_sheet_in_motor_mode_alone_says_it_cannot_check_the_signs(made):
+    from motorid.io.tables import read_table
+    from motorid.physics.efficiency import efficiencies
+
+    d, spec, df = made
+    ref = read_table(_csv(d, df, "map.csv"), spec)
+    ev, ehm, _ = efficiencies(ref.measured["torque"], ref.measured["q_a"], ref.measured["q_b"], ref.speed,
+                              ref.p_a, ref.p_b, ref.displacement)
+    sheet = df[["speed_rpm", "p_a_bar", "p_b_bar", "oil_temp_C"]].assign(eta_v_pct=100 * ev, eta_hm_pct=100 * ehm)
+    words = "every point read in motor mode"
+    assert not any(words in n for n in read_table(_csv(d, sheet, "four.csv"), spec).notes)  # both modes
+    motor = sheet[(sheet.speed_rpm > 0) & (sheet.p_a_bar > sheet.p_b_bar)]
+    assert any(words in n and 'convention = "pump"' in n for n in read_table(_csv(d, motor, "m.csv"), spec).notes)
+    with_torque = df[(df.speed_rpm > 0) & (df.p_a_bar > df.p_b_bar)]  # readings carry their sign
+    assert not any(words in n for n in read_table(_csv(d, with_torque, "t.csv"), spec).notes)
+
+
+def test_the_report_draws_no_predicted_efficiency_the_fit_does_not_predict(made, monkeypatch):
+    """A sheet of η_v and η_hm over ΔP alone: K_L0 and K_AB cannot be told apart, the flow is not
+    predicted (as `predict` says), and the report shows η_v measured only, saying why."""
+    from motorid.cli import main
+    from motorid.io.tables import read_table
+    from motorid.physics.efficiency import efficiencies
+
+    d, spec, df = made
+    motor = df[(df.speed_rpm > 0) & (df.p_a_bar > df.p_b_bar)]
+    ref = read_table(_csv(d, motor, "map.csv"), spec)
+    ev, ehm, _ = efficiencies(ref.measured["torque"], ref.measured["q_a"], ref.measured["q_b"], ref.speed,
+                              ref.p_a, ref.p_b, ref.displacement)
+    pd.DataFrame({"speed_rpm": motor.speed_rpm, "dp_bar": motor.p_a_bar - motor.p_b_bar, "oil_temp_C": 50.0,
+                  "eta_v_pct": 100 * ev, "eta_hm_pct": 100 * ehm}).to_csv(d / "sheet.csv", index=False)
+    monkeypatch.chdir(d)
+    assert main(["fit", "sheet.csv", "--motor", "motor.toml", "--out", "fit", "--quiet"]) == 0
+    assert main(["report", "fit"]) == 0
+    html = (d / "fit" / "report.html").read_text()
+    assert "Not predicted: q_a (it needs KL0, which the fit did not identify)" in html
+    assert "hydromechanical: RMS residual" in html and "volumetric: RMS residual" not in html
+
+
+def test_a_logs_channel_map_with_a_forgotten_sign_or_a_wrong_unit_is_refused(tmp_path):
+    """The ideal machine's checks of a table, on the logs' steady samples: flows negated (a pump
+    bench's signs, no convention = "pump"), a flow 60× off (l/s mapped as L/min)."""
+    from motorid.identify.pipeline import load_campaign
+    from motorid.io.spec import load_motor_spec
+
+    demo = REPO / "synthetic_data" / "demo"
+    spec = load_motor_spec(demo / "motor.toml")
+    frame = pd.read_csv(demo / "campaign.csv.gz")
+    frame = frame[frame.protocol != "startability"].iloc[:20000]
+    frame.to_csv(tmp_path / "good.csv", index=False)
+    load_campaign([tmp_path / "good.csv"], spec)  # the logs as written pass
+    frame.assign(q_a_lpm=-frame.q_a_lpm, q_b_lpm=-frame.q_b_lpm).to_csv(tmp_path / "signs.csv", index=False)
+    with pytest.raises(InputError, match=r"signs\.csv: the steady samples' port A flow is -1× the swept flow.*"
+                                         r"its sign runs against the ideal machine's"):
+        load_campaign([tmp_path / "signs.csv"], spec)
+    frame.assign(q_a_lpm=frame.q_a_lpm / 60, q_b_lpm=frame.q_b_lpm / 60).to_csv(tmp_path / "unit.csv", index=False)
+    with pytest.raises(InputError, match=r"unit\.csv: the steady samples' port A flow is 0\.01\d*× the swept flow"):
+        load_campaign([tmp_path / "unit.csv"], spec)
