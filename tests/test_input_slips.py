@@ -73,6 +73,10 @@ def test_an_oil_temperature_under_a_benchs_own_name_is_read_and_one_without_unit
     # the format's own column wins over another name of it (an ambient reading, say)
     t = read_table(_csv(d, hot.assign(temp_C=20.0), "both.csv"), spec)
     np.testing.assert_allclose(t.temperature, want)
+    twice = _csv(d, pd.concat([hot, hot[["oil_temp_C"]]], axis=1), "twice.csv")  # the format's own, twice
+    assert (d / "twice.csv").read_text().splitlines()[0].count("oil_temp_C") == 2
+    with pytest.raises(InputError, match=r"columns 'oil_temp_C' and 'oil_temp_C' give the same quantity"):
+        read_table(twice, spec)
     with pytest.raises(InputError, match=r"column 'T_oil' seems to be the oil temperature, but its unit suffix"):
         read_table(_csv(d, hot.rename(columns={"oil_temp_C": "T_oil"}), "nounit.csv"), spec)
     with pytest.raises(InputError, match=r"column 'p_a_bara' is an absolute pressure; the columns are gauge: "

@@ -99,18 +99,12 @@ def check_logs_against_ideal(dataset, spec, paths) -> None:
     fitted into K_L and K_F."""
     from pathlib import Path
 
-    from motorid.errors import InputError
     from motorid.io.table_checks import check_against_ideal
 
     if dataset.running is None or not dataset.n_running:
         return
-    try:
-        check_against_ideal(_SteadySamples(dataset, spec), "logs")
-    except InputError as exc:
-        names = ", ".join(Path(p).name for p in paths[:3]) + (f" (and {len(paths) - 3} more)" if len(paths) > 3
-                                                              else "")
-        raise InputError(str(exc).replace("logs: ", f"{names}: the steady samples' ", 1)
-                         .replace(" points", " samples")) from None
+    names = ", ".join(Path(p).name for p in paths[:3]) + (f" (and {len(paths) - 3} more)" if len(paths) > 3 else "")
+    check_against_ideal(_SteadySamples(dataset, spec), names, counted="samples", whose="the steady samples' ")
 
 
 def viscosity_model_warning(frame, dataset, ls) -> str:

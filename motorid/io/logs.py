@@ -188,13 +188,13 @@ _FORMAT_HEADER = {q.si: normalize_header(q.example) for q in _QUANTITIES}
 _ABSOLUTE_SUFFIXES = ("psia", "bara", "bar_a", "kpaa", "kpa_a", "mpaa", "mpa_a", "pa_a")
 
 
-def unknown_unit_words(name: str, q) -> str:
-    """Why column ``name`` (which seems to be quantity ``q``) is not read, in words."""
-    norm = normalize_header(name)
-    if q.si.startswith("p_") and norm.endswith(_ABSOLUTE_SUFFIXES):
+def absolute_pressure_words(name: str, q) -> str | None:
+    """Why column ``name`` (which seems to be quantity ``q``) is not read where it is an absolute
+    pressure, in words; None where it is not one."""
+    if q.si.startswith("p_") and normalize_header(name).endswith(_ABSOLUTE_SUFFIXES):
         return (f"column '{name}' is an absolute pressure; the columns are gauge: read the file through a "
                 f"channel map whose channel says unit = \"psia\" or \"bara\" (docs/formats.md)")
-    return f"column '{name}' has no unit suffix that motorid knows"
+    return None
 
 
 def _unit_hint(norm: str):
@@ -294,7 +294,8 @@ def _map_columns(path: Path, fields: list):
             what = f"'{q.example}' ({q.words}, any unit suffix such as {q.hint})"
             hints = [fields[j] for j in extras if _unit_hint(normalize_header(fields[j])) is q]
             if hints:
-                what += "; " + unknown_unit_words(hints[0], q)
+                what += "; " + (absolute_pressure_words(hints[0], q)
+                                or f"column '{hints[0]}' has no unit suffix that motorid knows")
         else:
             what = f"'{key}'"
         names = [_BY_SI[k].example if k in _BY_SI else k for k in missing[1:]]

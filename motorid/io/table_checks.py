@@ -67,9 +67,10 @@ def _torque_slope(t, ideal) -> tuple[float, int]:
     return _slope_of_larger(t, ideal, ok, least=3)
 
 
-def check_against_ideal(table, path) -> None:
+def check_against_ideal(table, path, counted: str = "points", whose: str = "") -> None:
     """Refuse (:class:`InputError`, one line) a table whose flows or torque are not near the ideal
-    machine's, or whose points give out more power than they take in."""
+    machine's, or whose points give out more power than they take in.  ``counted``, ``whose``: the
+    words for the rows (the steady samples of logs: "samples", "the steady samples' ")."""
     from motorid.physics.efficiency import efficiencies
 
     name = Path(str(path)).name
@@ -92,8 +93,8 @@ def check_against_ideal(table, path) -> None:
                    "flow, the speed's direction: docs/formats.md, channel maps)" + sign_hint)
         else:
             why = _CAUSES + sign_hint
-        raise InputError(f"{name}: {words} is {k:.3g}× {base} of D = {cm3:.4g} cm³/rev over {n} points, "
-                         f"outside {IDEAL_RATIO[0]}-{IDEAL_RATIO[1]}: {why}")
+        raise InputError(f"{name}: {whose}{words} is {k:.3g}× {base} of D = {cm3:.4g} cm³/rev over {n} "
+                         f"{counted}, outside {IDEAL_RATIO[0]}-{IDEAL_RATIO[1]}: {why}")
     # the power balance of each mode, at points that hold both the torque and the high-pressure flow
     _, _, eta = efficiencies(m["torque"], m["q_a"], m["q_b"], table.speed, table.p_a, table.p_b,
                              np.asarray(table.displacement, float))
@@ -102,7 +103,7 @@ def check_against_ideal(table, path) -> None:
     for mode, where in (("motor", power > 0), ("pump", power < 0)):
         e = np.asarray(eta)[where & big & np.isfinite(eta)]
         if e.size >= 3 and np.median(e) > MAX_EFFICIENCY:
-            raise InputError(f"{name}: its {mode}-mode points give out more power than they take in (median "
-                             f"overall efficiency {np.median(e):.3g} over {e.size} points): a pump map in its own "
+            raise InputError(f"{name}: its {mode}-mode {counted} give out more power than they take in (median "
+                             f"overall efficiency {np.median(e):.3g} over {e.size} {counted}): a pump map in its own "
                              f"signs? In the format's sense a pump delivering out of port A turns the way flow "
                              f"into port B drives it: its speed takes sign = -1 (docs/formats.md, sign conventions)")

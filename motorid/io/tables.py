@@ -26,7 +26,7 @@ from motorid.io.efficiency_columns import HEADERS as EFFICIENCY_HEADERS, outputs
 from motorid.io.efficiency_columns import loss_headers, outputs_from_losses
 from motorid.io.logs import (_BY_SI, _FLOW_UNITS, _HEADERS, _PRESSURE_UNITS, _TORQUE_UNITS,
                           _oil_viscosity, _parse_body, _read_text, _split_header, _unit_hint, normalize_header,
-                          unknown_unit_words, _FORMAT_HEADER)
+                          absolute_pressure_words, _FORMAT_HEADER)
 
 #: a median oil temperature above this [°C] is told as a probable °F column (mineral hydraulic oil runs
 #: below about 90 °C; ISO 4409 tests at 50 °C)
@@ -182,10 +182,11 @@ def _map_table_columns(path: Path, fields: list):
         if key in found:
             other = fields[found[key][0]]
             own = _FORMAT_HEADER.get(key)  # the format's own column wins over another name of its quantity
-            if own is not None and normalize_header(other) == own and normalize_header(name) != own:
-                return
-            if own is None or normalize_header(name) != own:
+            other_own, new_own = (own is not None and normalize_header(f) == own for f in (other, name))
+            if other_own == new_own:
                 raise InputError(f"{path}: columns '{other}' and '{name}' give the same quantity; keep one")
+            if other_own:
+                return
         found[key] = (j, unit)
 
     for j, name in enumerate(fields):
@@ -224,11 +225,9 @@ def _map_table_columns(path: Path, fields: list):
             q = None  # 'torque_setpoint_Nm', 'q_b_set_lpm': a known unit, a channel of its own (kept, ignored)
         given = q is not None and (q.si in found or (q.si in ("p_a_Pa", "p_b_Pa") and "dp_Pa" in found))
         if q is not None and (q.si in OUTPUTS or q.si in _INPUT_SI) and not given:
-            words = unknown_unit_words(name, q)
-            if words.endswith("knows"):
-                words = (f"column '{name}' seems to be the {q.words}, but its unit suffix is not one motorid knows "
-                         f"(such as {q.hint}): rename it, or read the file with a channel map")
-            raise InputError(f"{path}: {words}")
+            raise InputError(f"{path}: " + (absolute_pressure_words(name, q) or (
+                f"column '{name}' seems to be the {q.words}, but its unit suffix is not one motorid knows (such as "
+                f"{q.hint}): rename it, or read the file with a channel map")))
     if "speed_rad_s" not in found:
         raise InputError(f"{path}: missing required column 'speed_rpm' (shaft speed, any unit suffix such as "
                          f"_rpm, _rad_s)")
