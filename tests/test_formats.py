@@ -794,6 +794,46 @@ def test_a_tdms_file_with_a_group_per_run_reads_every_group_as_a_run(campaign, t
     np.testing.assert_allclose(got["time_s"], t0, atol=1e-6)
 
 
+def test_a_tdms_group_per_run_with_a_slow_channel_is_read_group_by_group(campaign, tmp_path):
+    """A group per run, and in each group the oil temperature at a tenth of the rate (its own
+    wf_increment; every group's clock starts at 5 s): 'T has N samples but … resample them to one time
+    base', though the docs say channels at other rates are taken at the time track's instants.  Each
+    group's slow channel is taken against that group's own time track."""
+    from nptdms import ChannelObject, GroupObject, TdmsWriter
+
+    _, raw, _ = campaign
+    run = raw["RunNo"]
+    runs = np.unique(run)[:3]
+    path = tmp_path / "groups.tdms"
+    with TdmsWriter(str(path)) as w:
+        for r in runs:
+            sel = run == r
+            step = float(np.median(np.diff(raw["t"][sel])))
+            group = f"Run {int(r):03d}"
+            fast = {"wf_increment": step, "wf_start_offset": 5.0}
+            slow = {"wf_increment": 10 * step, "wf_start_offset": 5.0}
+            w.write_segment([GroupObject(group)] + [
+                ChannelObject(group, k, v[sel][::10] if k == "Toil" else v[sel],
+                              properties=slow if k == "Toil" else fast)
+                for k, v in raw.items() if k not in ("t", "RunNo")])
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(map_text(time_name="n_Motor@time", fmt_lines='[file]\ngroup = "*"')
+                    .replace('run_id = {name = "RunNo"}\n', ""))
+    got = read_logs(path, load_motor_spec(MOTOR), channels=cmap)
+    keep = np.isin(run, runs)
+    assert len(got) == keep.sum()
+    whole = pd.DataFrame({k: v[keep] for k, v in raw.items()})
+    whole.to_parquet(tmp_path / "whole.parquet")
+    ref = read_logs(tmp_path / "whole.parquet", load_motor_spec(MOTOR), channels=_whole_map(tmp_path))
+    np.testing.assert_allclose(got["p_a_Pa"], ref["p_a_Pa"], rtol=1e-12)
+    err = np.abs(got["oil_temp_C"].to_numpy() - ref["oil_temp_C"].to_numpy())
+    assert err.max() < 1.0  # the slow temperature interpolated, in each run from its own first sample
+    # and not shifted by a run: each group's temperature comes from that group
+    for r in runs:
+        g = got["run_id"].astype(str) == f"Run {int(r):03d}"
+        assert abs(got.loc[g, "oil_temp_C"].mean() - ref.loc[g.to_numpy(), "oil_temp_C"].mean()) < 0.5
+
+
 def test_an_hdf5_file_with_a_group_per_run_and_its_protocol_as_an_attribute(campaign, tmp_path):
     """A logger that writes each run as an HDF5 group, with the test it belongs to as the group's
     attribute (h5py, as such loggers write it): [file] group = "runs/*" reads every group under /runs

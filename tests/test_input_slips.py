@@ -146,3 +146,22 @@ def test_a_logs_channel_map_with_a_forgotten_sign_or_a_wrong_unit_is_refused(tmp
     frame.assign(q_a_lpm=frame.q_a_lpm / 60, q_b_lpm=frame.q_b_lpm / 60).to_csv(tmp_path / "unit.csv", index=False)
     with pytest.raises(InputError, match=r"unit\.csv: the steady samples' port A flow is 0\.01\d*× the swept flow"):
         load_campaign([tmp_path / "unit.csv"], spec)
+
+
+def test_an_encoder_counting_the_other_way_is_said_where_the_user_reads_it(tmp_path, capsys):
+    """An encoder mounted the other way round: the fit notes it (the K_L(θ) harmonics' phase comes out
+    mirrored), but the note stayed in result.json's data.notes and `motorid fit` printed nothing."""
+    from motorid.cli import main
+
+    demo = REPO / "synthetic_data" / "demo"
+    frame = pd.read_csv(demo / "campaign.csv.gz")
+    frame = frame[frame.protocol != "startability"].iloc[:20000]
+    frame.assign(shaft_angle_deg=(-frame.shaft_angle_deg) % 360).to_csv(tmp_path / "reversed.csv", index=False)
+    assert main(["fit", str(tmp_path / "reversed.csv"), "--motor", str(demo / "motor.toml"),
+                 "--out", str(tmp_path / "fit"), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "note: the shaft angle runs against the logged speed" in printed
+    frame.to_csv(tmp_path / "right.csv", index=False)
+    assert main(["fit", str(tmp_path / "right.csv"), "--motor", str(demo / "motor.toml"),
+                 "--out", str(tmp_path / "fit2"), "--quiet"]) == 0
+    assert "runs against the logged speed" not in capsys.readouterr().out

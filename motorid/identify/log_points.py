@@ -108,7 +108,7 @@ def _csv_lacks_angle(path: Path) -> bool:
     file's head, then the column alone, its first :data:`ANGLE_PROBE_ROWS` rows before the rest."""
     from motorid.errors import InputError
     from motorid.io.logs import _map_columns, _split_header
-    from motorid.io.tables import _head_text
+    from motorid.io.table_columns import _head_text
 
     try:
         fields, delim, _, header_line = _split_header(path, _head_text(path))

@@ -79,9 +79,38 @@ def angle_points(spec, table, mechanisms: Sequence = (), params: dict | None = N
 
 
 PROBE_POINTS = 12  # table points the θ-probe looks at, spread over the table
+_PROBED: dict = {}  # the probe's answers (a diagnosis asks the same question for every fold and candidate)
+_PROBED_MAX = 512
 
 
 def _varies_with_angle(spec, table, mechanisms, params, free, rtol: float = 1e-9) -> bool:
+    """Whether the model's channels vary with θ at ``table``'s points (see :func:`angle_samples`).
+
+    The answer depends on the model's structure, not on the values: the spec, the mechanisms, the
+    parameters set free, which parameters are nonzero, and whether the table has speed and each
+    pressure difference at all.  It is kept under that key (the spec and mechanisms themselves held,
+    so that their ids stay theirs), and probed once per key."""
+    def nonzero(v) -> bool:
+        a = np.asarray(v, dtype=float)
+        return bool(np.any(a != 0) or np.any(~np.isfinite(a)))
+
+    p_a, p_b, p_c = (np.asarray(x, dtype=float) for x in (table.p_a, table.p_b, table.p_case))
+    shape = tuple(bool(np.any(np.abs(x) > 0)) for x in (np.asarray(table.speed, dtype=float), p_a - p_c,
+                                                          p_b - p_c, p_a - p_b))
+    key = (id(spec), tuple(id(m) for m in mechanisms), tuple(free),
+           tuple(sorted(k for k, v in params.items() if v is not None and nonzero(v))), shape,
+           bool(table.variable_displacement))
+    held = _PROBED.get(key)
+    if held is not None and held[1] is spec and all(a is b for a, b in zip(held[2], mechanisms)):
+        return held[0]
+    answer = _probe_angle(spec, table, mechanisms, params, free, rtol)
+    if len(_PROBED) >= _PROBED_MAX:
+        _PROBED.pop(next(iter(_PROBED)))
+    _PROBED[key] = (answer, spec, tuple(mechanisms))
+    return answer
+
+
+def _probe_angle(spec, table, mechanisms, params, free, rtol: float) -> bool:
     # points spread over the table, and those where a θ-term is largest (it scales with the speed, the
     # port pressures above the case and the pressure difference: zero at rest or at the case's pressure)
     spread = np.linspace(0, len(table) - 1, min(PROBE_POINTS, len(table))).round().astype(int)

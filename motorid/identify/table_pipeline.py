@@ -2,13 +2,8 @@
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
-
-import numpy as np
-
-from motorid.errors import InputError
 
 
 def identify_tables(log_paths, table_paths, spec, mechanisms=(), harmonics=None, channels=None):

@@ -177,7 +177,8 @@ class ChannelMap:
             if n is None:
                 n, first = raw.shape[0], (col, ch.name)
             elif raw.shape[0] != n:
-                resampled = _onto_time_base(source, ch, col, raw, t_ref, rows)
+                resampled = _onto_time_base(source, ch, col, raw, t_ref, rows, self.channels["time_s"].name
+                                            if "time_s" in self.channels else None)
                 if resampled is None:
                     raise InputError(f"{file_label}: channel '{ch.name}' ({col}) has {raw.shape[0]} samples but "
                                      f"'{first[1]}' ({first[0]}) has {n}; resample them to one time base")
@@ -327,23 +328,46 @@ def _seconds_of(raw: np.ndarray, ch: Channel) -> np.ndarray | None:
     return np.asarray(raw, float) * _TIME_UNITS[ch.unit] if ch.unit in _TIME_UNITS else None
 
 
-def _onto_time_base(source, ch: Channel, col: str, raw: np.ndarray, t_ref, rows):
+def _onto_time_base(source, ch: Channel, col: str, raw: np.ndarray, t_ref, rows, time_name=None):
     """A channel recorded at another rate than the time track (an MDF4 recorder's channel groups: the
     pressures at 1 kHz, the speed at 100 Hz, the temperature at 1 Hz) → its values at the time track's
     instants, from its own time stamps (``<name>@time``): linear for numbers, the last value for text.
-    None where the source has no time stamps for it, or the whole file is not being read."""
+    A source of a group per run (TDMS or HDF5 ``group = "*"``) is taken group by group, each group's
+    stamps against its own time track.  None where the source has no time stamps for it, or the whole
+    file is not being read."""
     if t_ref is None or rows is not None or ch.name.endswith("@time"):
         return None
     try:
         t_own = np.asarray(source.get(ch.name + "@time"), dtype=float)
     except (InputError, KeyError, ValueError, TypeError, AttributeError):
         return None
-    if t_own.shape != raw.shape or t_own.size < 2 or np.any(np.diff(t_own) < 0):
+    if t_own.shape != raw.shape or t_own.size < 2:
+        return None
+    if hasattr(source, "sample_groups") and time_name is not None:
+        ref_groups, own_groups = source.sample_groups(time_name), source.sample_groups(ch.name)
+        if ref_groups.shape != t_ref.shape or own_groups.shape != raw.shape:
+            return None
+        out = np.empty(t_ref.shape, dtype=object if COLUMNS[col] == "text" or raw.dtype.kind not in "fiub"
+                       else float)
+        for g in pd.unique(ref_groups):
+            mine, theirs = own_groups == g, ref_groups == g
+            piece = _interpolated(t_own[mine], raw[mine], t_ref[theirs], col)
+            if piece is None:
+                return None
+            out[theirs] = piece
+        return out
+    return _interpolated(t_own, raw, t_ref, col)
+
+
+def _interpolated(t_own: np.ndarray, raw: np.ndarray, t_ref: np.ndarray, col: str):
+    """``raw`` stamped ``t_own`` at the instants ``t_ref`` (linear; the last value for text), the first
+    and last value held beyond its stamps; None where its stamps are too few or run backwards."""
+    if t_own.size < 1 or np.any(np.diff(t_own) < 0):
         return None
     if COLUMNS[col] == "text" or raw.dtype.kind not in "fiub":
         idx = np.clip(np.searchsorted(t_own, t_ref, side="right") - 1, 0, t_own.size - 1)
         return raw[idx]
-    return np.interp(t_ref, t_own, raw.astype(float))  # the first and last value held beyond its stamps
+    return np.interp(t_ref, t_own, raw.astype(float))
 
 
 def _numeric(raw: np.ndarray, file_label: str, ch: Channel, offset: int = 0) -> np.ndarray:

@@ -46,8 +46,12 @@ def embed_png(fig, alt: str) -> str:
     """A figure as an ``<img>`` tag with a base64 PNG data URI (palette-reduced)."""
     from PIL import Image
 
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight", facecolor="white")
+    # a constrained layout already fits every label and legend in the figure: "tight" would draw it twice
+    tight = None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight"
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches=tight, facecolor="white")
     plt.close(fig)
     buf.seek(0)
     img = Image.open(buf).convert("RGB").quantize(colors=256)

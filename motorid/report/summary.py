@@ -21,6 +21,11 @@ def format_fit(doc: dict) -> str:
                  + ", ".join(f"{c} {n}" for c, n in fit["outliers"].items()))
     for w in fit["warnings"]:
         lines.append(f"warning: {w}")
+    notes = (doc.get("data") or {}).get("notes") or []
+    runs = [n for n in notes if str(n).startswith("run ")]
+    lines += [f"note: {n}" for n in notes if not str(n).startswith("run ")]  # the campaign's (encoder, gearbox)
+    if runs:
+        lines.append(f"note: {len(runs)} note(s) on single runs (result.json data.notes), the first: {runs[0]}")
     if "mcmc" in doc:
         m = doc["mcmc"]
         lines.append(f"emcee: {m['steps']} steps × {m['walkers']} walkers, converged: {m['converged']}")
