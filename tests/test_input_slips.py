@@ -165,3 +165,28 @@ def test_an_encoder_counting_the_other_way_is_said_where_the_user_reads_it(tmp_p
     assert main(["fit", str(tmp_path / "right.csv"), "--motor", str(demo / "motor.toml"),
                  "--out", str(tmp_path / "fit2"), "--quiet"]) == 0
     assert "runs against the logged speed" not in capsys.readouterr().out
+
+
+def test_a_point_below_the_slowest_fitted_speed_is_noted_as_extrapolated(tmp_path):
+    """A map fitted from 30 rpm up to 2 000 rpm: a point at 5 rpm (where the losses change fastest)
+    was inside the old slack (2 % of the range, 40 rpm) and came without a word."""
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.cli import main
+    from motorid.identify.predict import predict_points
+    from motorid.io.spec import load_motor_spec
+    from motorid.io.tables import read_tables
+
+    (tmp_path / "motor.toml").write_text(map_motor_toml(50.0))
+    spec = load_motor_spec(tmp_path / "motor.toml")
+    simulate_map(spec, DEMO_TRUTH, map_grid([30, 1000, 2000], [50, 150, 250], 4), temp_C=50.0,
+                 noise={"torque_Nm": 0.1, "q_a_lpm": 0.02, "q_b_lpm": 0.02, "q_case_lpm": 0.01},
+                 rng=np.random.default_rng(5)).to_csv(tmp_path / "map.csv", index=False)
+    assert main(["fit", str(tmp_path / "map.csv"), "--motor", str(tmp_path / "motor.toml"),
+                 "--out", str(tmp_path / "fit"), "--quiet"]) == 0
+    pd.DataFrame({"point_id": ["slow", "low_dp", "inside"], "speed_rpm": [5.0, 1000.0, 500.0],
+                  "p_a_bar": [150.0, 45.0, 150.0], "p_b_bar": [0.0] * 3}).to_csv(tmp_path / "pts.csv", index=False)
+    pred = predict_points(tmp_path / "fit", read_tables([tmp_path / "pts.csv"], spec, require_outputs=False))
+    pred = pred.set_index("point_id")
+    assert "extrapolated: speed 5 rpm outside the fitted 30-2000 rpm" in pred.loc["slow", "note"]
+    assert "|ΔP| 45 bar outside the fitted 50-250 bar" in pred.loc["low_dp", "note"]  # 10 % below: outside
+    assert pred.loc["inside", "note"] == ""

@@ -76,6 +76,9 @@ def run_table_fit(args, logs, tables, spec) -> int:
     print(format_summary(doc))
     if comparison is not None:
         print(format_comparison(comparison))
+    else:
+        print(f"no held-out comparison: {len(tf.table)} points, and the K-fold and extrapolation splits need at "
+              "least 10 (each fold must leave points to fit on)")
     print(f"wrote {out / RESULT_FILE}")
     if getattr(args, "report", False):
         from motorid.report.maps import write_map_report

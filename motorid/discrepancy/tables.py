@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from motorid.units import CHANNEL_WORDS
+
 
 def _profile_bic(tf) -> float:
     """BIC of a table fit with each channel's noise level profiled out:
@@ -41,6 +43,39 @@ HELD_OUT_EVIDENCE = 6.0
 HELD_OUT_GAIN = 0.10
 #: ... and makes no channel's worse by more than this share
 HELD_OUT_COST = 0.02
+
+
+#: a mechanism named on a table must not fit one channel worse by more than this share of what it gains
+#: on the others (a stand-in that trades a channel away: a pressure-viscosity law taking a cross-port
+#: turbulent leak bends the case drain, which is laminar), nor by more than ``min_evidence``
+CHANNEL_COST_SHARE = 0.25
+
+
+def channel_costs(before, after) -> dict:
+    """channel → Δχ² of its points from table fit ``before`` to ``after``, in ``before``'s noise
+    (positive: ``after`` fits it worse)."""
+    out = {}
+    for c, r0 in before.table_residuals.items():
+        r1 = after.table_residuals.get(c)
+        s = np.asarray(before.table_sigma.get(c), dtype=float) if before.table_sigma.get(c) is not None else None
+        if r1 is None or s is None:
+            continue
+        r0, r1 = np.asarray(r0, dtype=float), np.asarray(r1, dtype=float)
+        ok = np.isfinite(r0) & np.isfinite(r1) & np.isfinite(s) & (s > 0)
+        if ok.any():
+            out[c] = float(np.sum((r1[ok] ** 2 - r0[ok] ** 2) / s[ok] ** 2))
+    return out
+
+
+def traded_channel(before, after, min_evidence: float):
+    """(channel, its Δχ², the gain elsewhere) where ``after`` buys its gain by fitting a channel
+    worse (:data:`CHANNEL_COST_SHARE`), else None."""
+    costs = channel_costs(before, after)
+    gain = sum(-v for v in costs.values() if v < 0)
+    worst = max(costs.items(), key=lambda kv: kv[1], default=None)
+    if worst is not None and worst[1] > max(min_evidence, CHANNEL_COST_SHARE * gain):
+        return worst[0], worst[1], gain
+    return None
 
 
 def held_out_gains(table, spec, current: list, mech) -> dict:
@@ -179,7 +214,23 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
                 progress(f"{mech.id}: ΔBIC {bic - trials[-1][0]:.1f}")
         if not trials:
             break
-        b, mech, tf = min(trials, key=lambda t: t[0])
+        trials.sort(key=lambda t: t[0])
+        while alone and trials and bic - trials[0][0] >= min_evidence:
+            traded = traded_channel(best_fit, trials[0][2], min_evidence)
+            if traded is None:
+                break
+            # a stand-in: it fits one channel worse to fit the others; the next best is asked
+            c, cost, gain = traded
+            c = CHANNEL_WORDS.get(c, c).replace("running ", "")
+            steps.append({"id": trials[0][1].id, "delta_bic": bic - trials[0][0],
+                          "refused": f"fits the {c} worse (Δχ² +{cost:.1f}) to gain {gain:.1f} on the other "
+                                     "channels: a stand-in for physics it does not hold"})
+            if progress:
+                progress(f"{trials[0][1].id}: refused, it fits the {c} worse (Δχ² +{cost:.1f}) for the others")
+            cands.remove(trials.pop(0)[1])
+        if not trials:
+            break
+        b, mech, tf = trials[0]
         steps.append({"id": mech.id, "delta_bic": bic - b})
         if bic - b < min_evidence:
             if dataset is not None or bic - b < HELD_OUT_EVIDENCE or len(table) < 20:

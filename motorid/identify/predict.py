@@ -9,10 +9,14 @@ Bands, both 95 %, normal quantile 1.96:
 - ``*_lo95`` / ``*_hi95``: a **confidence band** of the model's value, from the fit's
   covariance by the delta method: var f = J C Jᵀ with J the JAX Jacobian of the
   output with respect to the fitted parameters (C rebuilt from result.json's
-  ``std`` and ``correlation``).  It says where the true mean of the motor lies.
+  ``std`` and ``correlation``), plus, for a table fit, the model's own error σ_m²:
+  what neighbouring points of the table share of their residuals (a model that misses
+  a real map by structure, :mod:`motorid.identify.lack_of_fit`; 0 where it does not),
+  carried into the efficiencies.  It says where the true mean of the motor lies.
 - ``*_pi_lo95`` / ``*_pi_hi95`` (torque and flows): a **prediction band** of a new
-  measurement, var f + σ², σ the fit's noise of that channel (a table fit: the
-  scatter of table points about the model; a log fit: the noise of one reading).
+  measurement, var f + max(σ², σ_m²), σ the fit's noise of that channel (a table fit:
+  the scatter of table points about the model, σ_m² of it the model error already in
+  the confidence band; a log fit: the noise of one reading).
 
 A channel that depends on a parameter the fit could not identify is left empty,
 with the reason in ``note``; one that does not (K_FS, K_s and the K_L(θ)
@@ -155,6 +159,7 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
             blank[i] = True
             why.setdefault(_OUT[i][1], k)
     noise = (doc.get("table", {}).get("noise") or doc.get("noise") or {})
+    var = var + _model_error_variance(noise, value, table, disp)
     out = pd.DataFrame()
     if table.has_point_id:
         out["point_id"] = table.point_id
@@ -171,8 +176,9 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
         out[col], out[col + "_lo95"], out[col + "_hi95"] = v, v - half, v + half
         if i < 4:
             sigma = (noise.get(c) or {}).get("sigma")
-            if sigma is not None:
-                half_p = Z95 * np.sqrt(var[i] + float(sigma) ** 2) / unit
+            if sigma is not None:  # the noise about the model, less the model error the band holds already
+                model_err = float((noise.get(c) or {}).get("model_error") or 0.0)
+                half_p = Z95 * np.sqrt(var[i] + max(float(sigma) ** 2 - model_err ** 2, 0.0)) / unit
                 out[col + "_pi_lo95"], out[col + "_pi_hi95"] = v - half_p, v + half_p
     note = "; ".join(f"{col} empty: it depends on {k}, not identified by the fit" for col, k in why.items())
     notes = [[note] if note else [] for _ in range(len(out))]
@@ -201,6 +207,30 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
     return out
 
 
+def _model_error_variance(noise: dict, value: np.ndarray, table, disp) -> np.ndarray:
+    """The variance the model's own error adds to each output (result.json ``table.noise.<c>.model_error``:
+    what neighbouring points of the fitted table share of their residuals, identify/lack_of_fit.py): to
+    the channels its square, to the efficiencies what it moves them by (central differences)."""
+    out = np.zeros_like(value)
+    errors = [float((noise.get(c) or {}).get("model_error") or 0.0) for c, _, _ in _OUT[:4]]
+    if not any(errors):
+        return out
+    args = (np.asarray(table.speed, float), np.asarray(table.p_a, float), np.asarray(table.p_b, float), disp)
+    for i, e in enumerate(errors):
+        if e <= 0:
+            continue
+        out[i] = e**2
+        if i == 3:  # the case drain enters no efficiency (the inlet flow does)
+            continue
+        up, down = value[:3].copy(), value[:3].copy()
+        up[i] += e
+        down[i] -= e
+        eta_up = np.asarray(efficiencies(*up, *args))
+        eta_down = np.asarray(efficiencies(*down, *args))
+        out[4:] += np.nan_to_num((0.5 * (eta_up - eta_down)) ** 2)
+    return out
+
+
 def _outside(doc: dict, table) -> dict:
     """point index → words on where it lies outside the region the fit saw (result.json's
     ``table.ranges``, or ``data.ranges`` of a fit of logs: its steady running samples)."""
@@ -214,8 +244,11 @@ def _outside(doc: dict, table) -> dict:
             continue
         lo, hi = bounds
         v, words, f, unit = values[key]
-        slack = 0.02 * max(hi - lo, abs(hi))  # one level (one speed, one viscosity): 2 % of it
-        for i in np.flatnonzero((v < lo - slack) | (v > hi + slack)):
+        # above: 2 % of the range (of the level, where one speed or one viscosity was fitted); below: 5 % of
+        # the lowest fitted value (losses change fastest near rest and near zero ΔP: 20 rpm is far below 50
+        # rpm, though near it on the scale of a 3 500 rpm range)
+        slack_hi, slack_lo = 0.02 * max(hi - lo, abs(hi)), 0.05 * abs(lo)
+        for i in np.flatnonzero((v < lo - slack_lo) | (v > hi + slack_hi)):
             part = f"{words} {v[i] * f:.4g} {unit} outside the fitted {lo * f:.4g}-{hi * f:.4g} {unit}"
             out[int(i)] = (out[int(i)] + ", " if int(i) in out else "extrapolated: ") + part
     seen = ranges.get("quadrants")

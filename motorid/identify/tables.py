@@ -48,6 +48,7 @@ from motorid.identify.identifiability import (ROUGH_NOISE_DOF, channel_parameter
                                               one_back_pressure_warning, relative_spread,
                                               single_pressure_sum_reason, tfc_carries_kf_warning)
 from motorid.identify.results import operating_ranges
+from motorid.identify.lack_of_fit import model_error_warnings, structured_error
 from motorid.identify.table_model import (THETA_POINTS, angle_points, angle_samples,  # noqa: F401
                                           bind_mechanisms, point_channels, table_samples)
 from motorid.errors import InputError
@@ -134,6 +135,7 @@ class TableFit:
     dataset: object = None
     notes: list = field(default_factory=list)
     table_noise_floor: dict = field(default_factory=dict)  # channel → σ_floor,c [SI] where the table weights points
+    model_error: dict = field(default_factory=dict)  # channel → its structured residual (identify/lack_of_fit.py)
 
 
 def _padded(table):
@@ -527,6 +529,10 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     warnings += list(getattr(table, "notes", []))
     resid = {c: table.measured[c] - pred[c] for c in TABLE_CHANNELS}
     sig = {c: point_sigma(c) for c in TABLE_CHANNELS}
+    # what neighbouring points share of their residuals: the model's error, not noise (lack_of_fit.py)
+    model_error = structured_error(table, {c: np.where(has[c], resid[c], np.nan) for c in TABLE_CHANNELS}) \
+        if whole else {}
+    warnings += model_error_warnings(model_error)
     tnoise = {c: (sigma_c[c] if np.isfinite(table.measured[c]).any() else None) for c in TABLE_CHANNELS}
     if log_fit is not None:
         noise, noise_by_run, outliers = dict(log_fit.noise), dict(log_fit.noise_by_run), dict(log_fit.outliers)
@@ -553,7 +559,8 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
                    converged=converged, warnings=warnings, residuals=residuals, sigma=sigma, inliers=inliers,
                    params_all=params_all, mechanisms=tuple(mechanisms), problem=None)
     floors = {c: v for c, v in floor_c.items() if table.weights_from.get(c, "none") != "none" and has[c].any()}
-    return TableFit(ls, table, tnoise, pred, resid, sig, time.time() - t0, dataset, table_noise_floor=floors)
+    return TableFit(ls, table, tnoise, pred, resid, sig, time.time() - t0, dataset, table_noise_floor=floors,
+                    model_error=model_error)
 
 
 def table_document(tf: TableFit) -> dict:
@@ -567,7 +574,9 @@ def table_document(tf: TableFit) -> dict:
                          "K ≥ 64 evenly spread shaft angles (exact for trigonometric terms of order < K), or at one "
                          "angle where nothing in the model varies with θ (probed)",
         "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s",
-                      **({"floor": tf.table_noise_floor[c]} if c in tf.table_noise_floor else {})}
+                      **({"floor": tf.table_noise_floor[c]} if c in tf.table_noise_floor else {}),
+                      **({"model_error": tf.model_error[c]["sigma"], "model_error_share": tf.model_error[c]["share"]}
+                         if c in tf.model_error else {})}
                   for c, v in tf.table_noise.items()},
         "weights_from": dict(t.weights_from),
         "variable_displacement": bool(t.variable_displacement),

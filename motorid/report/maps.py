@@ -208,10 +208,12 @@ def diagnosis_section(diagnosis: dict | None) -> str:
         body.append("<p>None: no candidate mechanism earned its place.</p>")
     body.append("<h3>Unexplained</h3>" + (unexplained_words(diagnosis.get("unexplained"))
                                            or "<p>Nothing: the residuals left are consistent with the noise.</p>"))
-    left = [s for s in (diagnosis.get("selection") or {}).get("steps", []) if isinstance(s, dict) and "skipped" in s]
-    if left:
-        body.append("<h3>Left out</h3><ul>" + "".join(f"<li><code>{_esc(s['id'])}</code>: {_esc(s['skipped'])}</li>"
-                                                      for s in left) + "</ul>")
+    left = [s for s in (diagnosis.get("selection") or {}).get("steps", [])
+            if isinstance(s, dict) and ("skipped" in s or "refused" in s)]
+    if left:  # skipped before a fit, or refused as a stand-in after one
+        body.append("<h3>Left out</h3><ul>" + "".join(
+            f"<li><code>{_esc(s['id'])}</code>: {_esc(s.get('skipped') or 'refused: ' + s['refused'])}</li>"
+            for s in left) + "</ul>")
     body.append("</section>")
     return "\n".join(body)
 
