@@ -347,3 +347,17 @@ def test_refused_stand_ins_are_said_with_their_own_reason():
     assert "predict oil temperature up to 40 °C)" in html and "other" not in html
     assert "chosen after case_pressure_friction" in html and "per-run zero offsets</li>" in html
     assert "()" not in html
+
+
+def test_the_printed_diagnosis_says_why_the_best_ranked_was_not_named():
+    """A 2 % torque gain with one back pressure ranked first (Δχ² 22 780) and the torque was reported
+    unexplained with no word on why (a second reader, stop 38): the printed summary now says it."""
+    from motorid.report.summary import format_diagnosis
+
+    doc = {"mismatch": True, "mechanisms": [], "channels": {},
+           "unexplained": [{"where": "running torque", "description": "running torque differs from the model"}],
+           "refused_stand_ins": [{"id": "torque_meter_gain", "why": "lowers χ² by 2.278e+04 (ΔBIC 2.277e+04) but "
+                                  "leaves every located structure in place (running torque …)", "extrapolation": None}]}
+    text = format_diagnosis(doc)
+    assert "unexplained: running torque differs" in text
+    assert "not named torque_meter_gain: lowers χ² by 2.278e+04" in text

@@ -429,6 +429,14 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
                 cand.location = after
                 best = cand
                 break
+            if cand.delta_bic > min_evidence and after.significant:
+                # it pays, held out too, but the structure it was to explain stays where it was: at most a
+                # part of the cause; said, not named (the user sees why the best ranked is not the answer)
+                say(f"not named {cand.mechanism.id}: ΔBIC {cand.delta_bic:.1f}, but the structure stays in place")
+                refused.append({"id": cand.mechanism.id, "why": f"lowers χ² by {cand.delta_chi2:.4g} (ΔBIC "
+                                f"{cand.delta_bic:.4g}) but leaves every located structure in place ("
+                                f"{'; '.join(s.where for s in after.significant[:3])}): at most a part of the "
+                                "cause, or a stand-in for it", "extrapolation": getattr(cand, "extrapolation", None)})
         steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
                        "cv_gain": c.cv_gain, "accepted": c is best,
                        "screened_delta_chi2": getattr(c, "screened", (c.delta_chi2,))[0],

@@ -45,6 +45,9 @@ def format_diagnosis(doc: dict) -> str:
                 lines.append(f"  {k} = {p['value']:.4g} ± {(p['std'] or 0):.2g} {p['unit']}")
     for u in doc["unexplained"]:
         lines.append(f"unexplained: {u.get('description', u['where'])}")
+    for r in doc.get("refused_stand_ins") or []:  # the best ranked that were not named, and why
+        if isinstance(r, dict) and r.get("why"):
+            lines.append(f"not named {r.get('id')}: {r['why']}")
     for c, v in doc["channels"].items():
         if v["residual_rms_before"] is not None:
             lines.append(f"{c}: residual RMS {v['residual_rms_before']:.4g} → {v['residual_rms_after']:.4g} "
