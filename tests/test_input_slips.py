@@ -105,11 +105,16 @@ def test_an_efficiency_sheet_in_motor_mode_alone_says_it_cannot_check_the_signs(
     assert not any(words in n for n in read_table(_csv(d, with_torque, "t.csv"), spec).notes)
 
 
-def test_the_report_draws_no_predicted_efficiency_the_fit_does_not_predict(made, monkeypatch):
-    """A sheet of η_v and η_hm over ΔP alone: K_L0 and K_AB cannot be told apart, the flow is not
-    predicted (as `predict` says), and the report shows η_v measured only, saying why."""
+def test_an_efficiency_sheet_over_dp_alone_predicts_its_own_efficiency_through_the_sum_of_the_leaks(made,
+                                                                                                      monkeypatch):
+    """A sheet of η_v and η_hm over ΔP alone holds the inlet flow with its outlet at the case's
+    pressure, which sees only K_L0 + K_AB: the two were both dropped and predict left the flows and
+    η_v, the sheet's own quantity, empty at every point (a second reader, stop 38).  K_AB is held at 0
+    and K_L0 carries the sum: the inlet flow and η_v are predicted where the outlet is at the case's
+    pressure; the case drain, the outlet flow, and the inlet where the outlet is above it stay empty."""
     from motorid.cli import main
-    from motorid.io.tables import read_table
+    from motorid.identify.predict import predict_points
+    from motorid.io.tables import read_table, read_tables
     from motorid.physics.efficiency import efficiencies
 
     d, spec, df = made
@@ -121,10 +126,27 @@ def test_the_report_draws_no_predicted_efficiency_the_fit_does_not_predict(made,
                   "eta_v_pct": 100 * ev, "eta_hm_pct": 100 * ehm}).to_csv(d / "sheet.csv", index=False)
     monkeypatch.chdir(d)
     assert main(["fit", "sheet.csv", "--motor", "motor.toml", "--out", "fit", "--quiet"]) == 0
+    doc = __import__("json").loads((d / "fit" / "result.json").read_text())
+    assert doc["parameters"]["KL0"]["identifiable"] and not doc["parameters"]["KAB"]["identifiable"]
+    assert "K_L0 carries K_AB" in doc["parameters"]["KAB"]["reason"]
+    # the sum is the truth's: K_L0 + K_AB of the map that made the sheet, within its error
+    total = DEMO_TRUTH["KL0"] + DEMO_TRUTH["KAB"]
+    assert abs(doc["parameters"]["KL0"]["value"] - total) < 3 * doc["parameters"]["KL0"]["std"] + 0.01 * total
+    pd.DataFrame({"point_id": ["sheet", "boost"], "speed_rpm": [700.0, 700.0], "p_a_bar": [120.0, 140.0],
+                  "p_b_bar": [0.0, 20.0], "p_case_bar": [0.0, 0.0], "oil_temp_C": [50.0, 50.0]}).to_csv(
+        d / "pts.csv", index=False)
+    pred = predict_points(d / "fit", read_tables([d / "pts.csv"], spec, require_outputs=False)).set_index("point_id")
+    assert np.isfinite(pred.loc["sheet", "q_a_lpm"]) and np.isfinite(pred.loc["sheet", "volumetric_efficiency"])
+    assert np.isnan(pred.loc["sheet", "q_case_lpm"]) and np.isnan(pred.loc["sheet", "q_b_lpm"])
+    assert np.isnan(pred.loc["boost", "q_a_lpm"]) and "share their sum here" in pred.loc["boost", "note"]
+    from motorid.bench.maps import simulate_map
+
+    true = simulate_map(spec, DEMO_TRUTH, np.array([[700.0, 120.0, 0.0]]), temp_C=50.0)
+    q_true = float(true.q_a_lpm.iloc[0])
+    assert pred.loc["sheet", "q_a_lpm_lo95"] <= q_true <= pred.loc["sheet", "q_a_lpm_hi95"]
     assert main(["report", "fit"]) == 0
     html = (d / "fit" / "report.html").read_text()
-    assert "Not predicted: q_a (it needs KL0, which the fit did not identify)" in html
-    assert "hydromechanical: RMS residual" in html and "volumetric: RMS residual" not in html
+    assert "volumetric: RMS residual" in html and "Not predicted: q_a" not in html
 
 
 def test_a_logs_channel_map_with_a_forgotten_sign_or_a_wrong_unit_is_refused(tmp_path):

@@ -77,7 +77,9 @@ class _Undetermined:
             self.notes.append(f"{key} = {self.assume[key]:.6g} assumed (--assume): the fit did not determine "
                               f"it ({reason})")
             return self.assume[key]
-        if key in HELD_AT_ZERO:
+        from motorid.identify.identifiability import KAB_HELD_FOR_KL0
+
+        if key in HELD_AT_ZERO or KAB_HELD_FOR_KL0 in reason:  # held at 0, another carrying it (K_L0: K_AB)
             self.notes.append(f"{key} = 0, as the fit held it: {reason}")
             return 0.0
         if key in self.unused:

@@ -45,6 +45,21 @@ KF_HELD_FOR_TFC = ("K_F cannot be told from T_Fc, so it is held at its start val
                    "K_F·D·(P_A+P_B) there")
 
 
+#: the reason K_AB gets where a table's flows hold only K_L0 + K_AB (the inlet flow, its outlet at the case's
+#: pressure): K_AB held at 0 and K_L0 fitted, carrying it, so that the inlet flow (and η_v) stays predicted
+KAB_HELD_FOR_KL0 = ("K_AB cannot be told from K_L0 with these flows (the inlet flow alone, its outlet port at the "
+                    "case's pressure, holds only their sum): it is held at 0 and K_L0 carries K_AB")
+
+
+def kl0_carries_kab_warning(reasons: dict, free) -> str | None:
+    """The warning that K_L0 is an effective value where K_AB was held for it; else None."""
+    if "KL0" not in free or KAB_HELD_FOR_KL0 not in reasons.get("KAB", ""):
+        return None
+    return ("K_L0 is the leakage the inlet flows see, K_L0 + K_AB (K_AB not identifiable, held at 0): it predicts "
+            "the inlet flow and the volumetric efficiency where the outlet port is at the case's pressure, not "
+            "the case drain or the outlet flow; a case-drain or outlet flow column tells them apart")
+
+
 def single_pressure_sum_reason(what: str, psum) -> str:
     """K_F's reason where ``what`` (the running torque, a table's torque) sits at one P_A+P_B [Pa]: K_F is
     held at its start and T_Fc fitted, carrying K_F·D·(P_A+P_B) of that sum, so that the friction torque

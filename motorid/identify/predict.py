@@ -114,6 +114,8 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
 
     doc, spec, mechanisms = result if isinstance(result, tuple) else load_result(result, spec)
     params, names, cov, unidentified = fitted_parameters(doc, spec, mechanisms)
+    for k in _carried(doc):  # held at 0 by the fit, another carrying it: not the spec's default
+        params[k] = 0.0
     mechanisms = bind_mechanisms(mechanisms, table)
     samples = angle_samples(spec, table, mechanisms, params, names)
     disp = np.asarray(table.displacement, float)
@@ -144,20 +146,29 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
         C = cov / np.outer(std, std)
         var = np.einsum("onk,kl,onl->on", J, C, J)
     # channels that lean on a parameter the fit did not identify: left empty
-    blank = np.zeros(value.shape[0], bool)
+    blank = np.zeros(value.shape, bool)
     why = {}
+    carried = _carried(doc)
     for k in unidentified:
         if k not in params:
             continue
         p2 = dict(base)
-        p2[k] = base[k] * 2.0 + (0.1 if float(params[k]) == 0.0 else 0.0)
+        if k in carried:  # held for another that carries it (K_AB by K_L0): only their split is unknown
+            other = carried[k]
+            step = 0.5 * abs(float(params[other])) or 1e-13
+            p2[k], p2[other] = base[k] + step, base[other] - step
+        else:
+            p2[k] = base[k] * 2.0 + (0.1 if float(params[k]) == 0.0 else 0.0)
         # where the model at p2 varies with θ (a K_L(θ) harmonic), its θ-average needs every angle
         at = angle_samples(spec, table, mechanisms, p2)
         ref = value if at.theta.shape == samples.theta.shape else np.asarray(outputs_at(base, at))
-        moved = np.any(np.abs(np.asarray(outputs_at(p2, at)) - ref) > 1e-9 * (np.abs(ref) + 1e-300), axis=1)
-        for i in np.flatnonzero(moved & np.any(np.isfinite(value), axis=1)):
-            blank[i] = True
-            why.setdefault(_OUT[i][1], k)
+        moved = np.abs(np.asarray(outputs_at(p2, at)) - ref) > 1e-9 * (np.abs(ref) + 1e-300)
+        if k not in carried:  # the whole output, wherever it moves
+            moved = np.repeat(np.any(moved, axis=1, keepdims=True), moved.shape[1], axis=1)
+        moved &= np.isfinite(value)
+        blank |= moved
+        for i in np.flatnonzero(moved.any(axis=1)):
+            why.setdefault(_OUT[i][1], (k, bool(moved[i].all())))
     noise = (doc.get("table", {}).get("noise") or doc.get("noise") or {})
     var = var + _model_error_variance(noise, value, table, disp)
     out = pd.DataFrame()
@@ -180,8 +191,16 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
                 model_err = float((noise.get(c) or {}).get("model_error") or 0.0)
                 half_p = Z95 * np.sqrt(var[i] + max(float(sigma) ** 2 - model_err ** 2, 0.0)) / unit
                 out[col + "_pi_lo95"], out[col + "_pi_hi95"] = v - half_p, v + half_p
-    note = "; ".join(f"{col} empty: it depends on {k}, not identified by the fit" for col, k in why.items())
+    note = "; ".join(f"{col} empty: it depends on {k}, not identified by the fit" for col, (k, whole) in why.items()
+                     if whole)
+    where = {col: k for col, (k, whole) in why.items() if not whole}  # empty at some points only: said there
     notes = [[note] if note else [] for _ in range(len(out))]
+    for i, (c, col, _) in enumerate(_OUT):
+        if col in where:
+            for j in np.flatnonzero(blank[i] & ~blank[i].all()):
+                notes[j].append(f"{col} empty: it depends on how {where[col]} and {_carried(doc)[where[col]]} "
+                                "share their sum here, which the fit did not determine")
+
     # at rest the torque lies anywhere within static friction, which a running fit does not give
     rest = np.abs(np.asarray(table.speed, float)) < STALL_SPEED
     for col in ("torque_Nm", "volumetric_efficiency", "hydromechanical_efficiency", "overall_efficiency"):
@@ -205,6 +224,14 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
         notes[i].append(words)
     out["note"] = ["; ".join(n) for n in notes]
     return out
+
+
+def _carried(doc: dict) -> dict:
+    """parameter held for another that carries it → that one (K_AB held at 0, K_L0 its sum with it)."""
+    from motorid.identify.identifiability import KAB_HELD_FOR_KL0
+
+    reason = str((doc.get("parameters", {}).get("KAB") or {}).get("reason") or "")
+    return {"KAB": "KL0"} if KAB_HELD_FOR_KL0 in reason else {}
 
 
 def _model_error_variance(noise: dict, value: np.ndarray, table, disp) -> np.ndarray:

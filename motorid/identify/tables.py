@@ -44,7 +44,8 @@ import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
 from motorid import model
-from motorid.identify.identifiability import (ROUGH_NOISE_DOF, channel_parameters, coverage_reasons,
+from motorid.identify.identifiability import (KAB_HELD_FOR_KL0, ROUGH_NOISE_DOF, channel_parameters,
+                                              coverage_reasons, kl0_carries_kab_warning,
                                               one_back_pressure_warning, relative_spread,
                                               single_pressure_sum_reason, tfc_carries_kf_warning)
 from motorid.identify.results import operating_ranges
@@ -433,6 +434,15 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         converged = ok
         values = {k: float(x[i] * prob.scales[i]) for i, k in enumerate(free)}
         weak = _null_space(J, free) if free else {}
+        if {"KL0", "KAB"} <= set(weak) and not any("KL0" in weak[k] or "KAB" in weak[k] for k in weak
+                                                   if k not in ("KL0", "KAB")):
+            # the flows hold only K_L0 + K_AB (an efficiency sheet's inlet flow): K_L0 carries the sum
+            reasons["KAB"] = KAB_HELD_FOR_KL0
+            start["KL0"] = values["KL0"] + values["KAB"]
+            start["KAB"] = 0.0
+            weak = {k: v for k, v in weak.items() if k not in ("KL0", "KAB")}
+            weak["KAB"] = KAB_HELD_FOR_KL0
+            values["KL0"] = start["KL0"]
         if weak:
             for k in weak:
                 reasons[k] = weak[k]
@@ -517,9 +527,9 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
             warnings.append(f"{k}: standard error exceeds the value; the data barely constrain it")
     if not converged:
         warnings.append("the table fit stopped before converging (scipy least_squares, max_nfev)")
-    effective = tfc_carries_kf_warning(reasons, free, "data", "points")
-    if effective:
-        warnings.append(effective)
+    for effective in (tfc_carries_kf_warning(reasons, free, "data", "points"), kl0_carries_kab_warning(reasons, free)):
+        if effective:
+            warnings.append(effective)
     if "KF" in free:
         tq = np.isfinite(table.measured["torque"]) & train
         note = one_back_pressure_warning(np.minimum(table.p_a, table.p_b)[tq], values["KF"])
