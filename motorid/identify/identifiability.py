@@ -51,6 +51,14 @@ KAB_HELD_FOR_KL0 = ("K_AB cannot be told from K_L0 with these flows (the inlet f
                     "case's pressure, holds only their sum): it is held at 0 and K_L0 carries K_AB")
 
 
+def at_bound_warning(k: str) -> str:
+    """The words for a parameter ≥ 0 fitted at its bound: not a measurement of zero."""
+    return (f"{k} is at its lower bound 0: the fit gives it nothing beyond what the other terms hold; that is the "
+            "sign of its absence or of another term taking its share (T_Fc's constant loss taken by "
+            "K_F·D·(P_A+P_B) at a boost pressure, K_F taken by a torque transducer's gain error), not a "
+            "measurement of 0")
+
+
 def kl0_carries_kab_warning(reasons: dict, free) -> str | None:
     """The warning that K_L0 is an effective value where K_AB was held for it; else None."""
     if "KL0" not in free or KAB_HELD_FOR_KL0 not in reasons.get("KAB", ""):

@@ -21,7 +21,7 @@ import numpy as np
 
 from motorid import model
 from motorid.identify.covariance import breakaway_sandwich, covariance_from_normal, viscosity_covariance
-from motorid.identify.identifiability import coverage_reasons, tfc_carries_kf_warning
+from motorid.identify.identifiability import at_bound_warning, coverage_reasons, tfc_carries_kf_warning
 from motorid.identify.noise import correlation_threshold, correlation_times
 from motorid.identify.noise import breakaway_noise, floor_noise, initial_noise, residual_noise, spikiness
 from motorid.identify.problem import Problem
@@ -212,7 +212,7 @@ def _reported(names, free, fixed, values, std, reasons, start, mechanisms, warni
     for k in free:
         info = model.parameter_info(k, mechanisms)
         if info.positive and out_values[k] < 1e-4 * abs(start.get(k) or info.typical):
-            warnings.append(f"{k} is at its lower bound 0: the data show no sign of it")
+            warnings.append(at_bound_warning(k))
         elif info.positive and out_std[k] > abs(out_values[k]):
             warnings.append(f"{k}: standard error exceeds the value; the logs barely constrain it")
     return out_values, out_std, ident

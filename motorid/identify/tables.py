@@ -44,7 +44,7 @@ import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
 from motorid import model
-from motorid.identify.identifiability import (KAB_HELD_FOR_KL0, ROUGH_NOISE_DOF, channel_parameters,
+from motorid.identify.identifiability import (KAB_HELD_FOR_KL0, ROUGH_NOISE_DOF, at_bound_warning, channel_parameters,
                                               coverage_reasons, kl0_carries_kab_warning,
                                               one_back_pressure_warning, relative_spread,
                                               single_pressure_sum_reason, tfc_carries_kf_warning)
@@ -522,7 +522,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     for k in free:
         info = model.parameter_info(k, mechanisms)
         if info.positive and values[k] < 1e-4 * abs(info.typical):
-            warnings.append(f"{k} is at its lower bound 0: the data show no sign of it")
+            warnings.append(at_bound_warning(k))
         elif std[free.index(k)] > abs(values[k]):
             warnings.append(f"{k}: standard error exceeds the value; the data barely constrain it")
     if not converged:
