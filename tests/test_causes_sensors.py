@@ -80,3 +80,22 @@ def test_the_lag_is_placed_on_the_right_meter_and_recovers_tau(lagged):
     value, std = best.values["sensor_lag_q_a.tau"], best.std["sensor_lag_q_a.tau"]
     assert abs(value - tau) < 4 * std, (value, std, tau)
     assert not [s for s in locate(best, ds, spec).significant if s.channel == "q_a"]
+
+
+def test_a_torque_gain_named_at_one_back_pressure_says_what_its_value_rests_on():
+    """At one back pressure a torque gain is told from K_F by the shaft-angle ripple alone (a second
+    reader's simulator, whose ripple differs a little from the model's, got g 7σ low): the named
+    gain says so; at two back pressures it does not."""
+    import types
+
+    from motorid.discrepancy.select import _caveats
+    from motorid.physics.registry import get
+
+    named = [types.SimpleNamespace(mechanism=get("torque_meter_gain"))]
+    dp = np.linspace(20e5, 250e5, 50)
+    one = types.SimpleNamespace(running=types.SimpleNamespace(speed=np.ones(50), p_a=7e5 + dp, p_b=np.full(50, 7e5)))
+    two = types.SimpleNamespace(running=types.SimpleNamespace(speed=np.ones(50), p_a=7e5 + dp,
+                                                              p_b=np.where(np.arange(50) % 2, 7e5, 30e5)))
+    assert "told from K_F only by the torque's shaft-angle ripple" in _caveats(named, one)["torque_meter_gain"]
+    assert _caveats(named, two) == {}
+    assert _caveats([types.SimpleNamespace(mechanism=get("torque_offset"))], one) == {}

@@ -70,6 +70,7 @@ class Diagnosis:
     refused: list = field(default_factory=list)  # [{id, why, extrapolation}]
     unexplained_detail: list | None = None  # unexplained.unexplained_entries
     seconds: dict = field(default_factory=dict)  # wall time per step (issue 16)
+    caveats: dict = field(default_factory=dict)  # mechanism id → what its value rests on, where that is fragile
 
 
 def _fixed(ls: FitResult) -> tuple[dict, dict]:
@@ -479,7 +480,25 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     lap("unexplained: words and empirical terms")
     return Diagnosis(mismatch=bool(accepted or unexplained), base=base, final=final, accepted=accepted,
                      location_before=loc0, location_after=loc_after, steps=steps, unexplained=unexplained,
-                     refused=refused, unexplained_detail=detail, seconds=seconds)
+                     refused=refused, unexplained_detail=detail, seconds=seconds,
+                     caveats=_caveats(accepted, dataset))
+
+
+def _caveats(accepted: list, dataset) -> dict:
+    """What a named value rests on where that is fragile: a torque gain at one back pressure is told from
+    K_F (K_F·D·(P_A+P_B) is then K_F·D·|ΔP| plus a constant) by the shaft-angle torque ripple alone, so a
+    ripple the model holds a little wrong moves it beyond its std (a second reader's simulator: −7σ)."""
+    from motorid.physics.sensors import one_back_pressure
+
+    out = {}
+    s = getattr(dataset, "running", None)
+    if s is not None and np.size(s.speed) and any(c.mechanism.id == "torque_meter_gain" for c in accepted):
+        if one_back_pressure(np.minimum(np.asarray(s.p_a, float), np.asarray(s.p_b, float))):
+            out["torque_meter_gain"] = (
+                "every running sample has its low-pressure port at one pressure: the gain is told from K_F only by "
+                "the torque's shaft-angle ripple, so its value (and K_F's, T_Fc's) carries any error of the "
+                "model's ripple beyond its std; runs at a second back pressure determine it")
+    return out
 
 
 def _rms(ls: FitResult, c: str):
@@ -511,7 +530,9 @@ def diagnosis_document(dg: Diagnosis, spec) -> dict:
             words = ""
         mechs.append({
             "id": m.id, "name": m.name, "channels": list(m.channels), "where": where,
-            "explanation": f"{m.physics} {words}".strip(), "reference": m.reference,
+            "explanation": f"{m.physics} {words}".strip() + (f" Caveat: {dg.caveats[m.id]}." if m.id in dg.caveats
+                                                             else ""),
+            "reference": m.reference,
             "parameters": params,
             "evidence": {"delta_chi2": cand.delta_chi2, "delta_bic": cand.delta_bic,
                          "held_out_chi2_gain": cand.cv_gain},
