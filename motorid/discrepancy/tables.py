@@ -78,6 +78,45 @@ def traded_channel(before, after, min_evidence: float):
     return None
 
 
+#: on a variable unit, a mechanism fitted on the larger (smaller) settings must not predict the others worse
+#: than the model without it by more than this factor of a channel's mean squared error
+SETTING_SPLIT_FACTOR = 1.25
+
+
+def setting_split_refusal(table, spec, current: list, mech) -> str | None:
+    """Words where ``mech`` fails a variable unit's other displacement settings, else None.
+
+    The model with and without ``mech`` is fitted on the settings above the median setting and predicts
+    those at or below it, and the other way round.  A law of the motor predicts the settings it was not
+    fitted on; a stand-in for a loss that scales with the swash angle otherwise than the model says (a
+    displacement error standing in for losses that keep the largest setting's size) does not."""
+    from motorid.comparators.evaluate import MotoridModel
+
+    if not getattr(table, "variable_displacement", False) or len(table) < 20:
+        return None
+    disp = np.asarray(table.displacement, dtype=float)
+    levels = np.unique(np.round(disp / np.nanmax(disp), 3))
+    if levels.size < 2:
+        return None
+    cut = float(np.median(levels)) * np.nanmax(disp)
+    for train, words in ((disp > cut, "the smaller settings from the larger"),
+                         (disp <= cut, "the larger settings from the smaller")):
+        test = ~train
+        if train.sum() < 10 or test.sum() < 5:
+            continue
+        mse = {}
+        for name, mechs in (("without", list(current)), ("with", list(current) + [mech])):
+            pred = MotoridModel(spec, mechs).fit_split(table, train).predict(table)
+            mse[name] = {c: float(np.nanmean((np.asarray(table.measured[c])[test] - np.asarray(pred[c])[test]) ** 2))
+                         for c in ("torque", "q_a", "q_b", "q_case")}
+        for c, before in mse["without"].items():
+            after = mse["with"][c]
+            if np.isfinite(before) and np.isfinite(after) and before > 0 and after > SETTING_SPLIT_FACTOR * before:
+                return (f"predicts {words} worse than the model without it ({CHANNEL_WORDS.get(c, c)}: mean squared "
+                        f"error ×{after / before:.2f}): a stand-in for a loss that scales with the setting otherwise")
+    return None
+
+
 def held_out_gains(table, spec, current: list, mech) -> dict:
     """channel → share of its 5-fold held-out squared error that ``mech`` removes from the model
     with ``current`` (parameters refitted per fold; negative: worse)."""
@@ -217,16 +256,19 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
         trials.sort(key=lambda t: t[0])
         while alone and trials and bic - trials[0][0] >= min_evidence:
             traded = traded_channel(best_fit, trials[0][2], min_evidence)
-            if traded is None:
-                break
-            # a stand-in: it fits one channel worse to fit the others; the next best is asked
-            c, cost, gain = traded
-            c = CHANNEL_WORDS.get(c, c).replace("running ", "")
-            steps.append({"id": trials[0][1].id, "delta_bic": bic - trials[0][0],
-                          "refused": f"fits the {c} worse (Δχ² +{cost:.1f}) to gain {gain:.1f} on the other "
-                                     "channels: a stand-in for physics it does not hold"})
+            if traded is not None:
+                # a stand-in: it fits one channel worse to fit the others; the next best is asked
+                c, cost, gain = traded
+                c = CHANNEL_WORDS.get(c, c).replace("running ", "")
+                why = (f"fits the {c} worse (Δχ² +{cost:.1f}) to gain {gain:.1f} on the other channels: a stand-in "
+                       "for physics it does not hold")
+            else:
+                why = setting_split_refusal(table, spec, current, trials[0][1])
+                if why is None:
+                    break
+            steps.append({"id": trials[0][1].id, "delta_bic": bic - trials[0][0], "refused": why})
             if progress:
-                progress(f"{trials[0][1].id}: refused, it fits the {c} worse (Δχ² +{cost:.1f}) for the others")
+                progress(f"{trials[0][1].id}: refused, it {why}")
             cands.remove(trials.pop(0)[1])
         if not trials:
             break
