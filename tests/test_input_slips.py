@@ -212,3 +212,23 @@ def test_a_point_below_the_slowest_fitted_speed_is_noted_as_extrapolated(tmp_pat
     assert "extrapolated: speed 5 rpm outside the fitted 30-2000 rpm" in pred.loc["slow", "note"]
     assert "|ΔP| 45 bar outside the fitted 50-250 bar" in pred.loc["low_dp", "note"]  # 10 % below: outside
     assert pred.loc["inside", "note"] == ""
+
+
+def test_predict_with_an_unidentified_parameter_at_a_point_at_rest_or_at_zero_pressure_difference(made,
+                                                                                                 monkeypatch):
+    """A fit of flows alone (K_v, K_F, T_Fc not identified) predicted at a point at rest and one at
+    ΔP = 0, where the efficiencies are not defined: the per-point blanking of stop 38 raised KeyError
+    'Kv' there (a second reader's review); the torque column is empty with its note, the flows given."""
+    from motorid.cli import main
+    from motorid.identify.predict import predict_points
+    from motorid.io.tables import read_tables
+
+    d, spec, df = made
+    df.drop(columns=["torque_Nm"]).to_csv(d / "flows.csv", index=False)
+    monkeypatch.chdir(d)
+    assert main(["fit", "flows.csv", "--motor", "motor.toml", "--out", "fit", "--quiet"]) == 0
+    pd.DataFrame({"point_id": ["run", "rest", "level"], "speed_rpm": [1000.0, 0.0, 1000.0],
+                  "p_a_bar": [150.0, 150.0, 100.0], "p_b_bar": [0.0, 0.0, 100.0]}).to_csv(d / "pts.csv", index=False)
+    pred = predict_points(d / "fit", read_tables([d / "pts.csv"], spec, require_outputs=False)).set_index("point_id")
+    assert pred["torque_Nm"].isna().all() and np.isfinite(pred["q_a_lpm"]).all()
+    assert all("torque_Nm empty: it depends on" in n for n in pred["note"])

@@ -269,7 +269,7 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             steps.append({"id": trials[0][1].id, "delta_bic": bic - trials[0][0], "refused": why})
             if progress:
                 progress(f"{trials[0][1].id}: refused, it {why}")
-            cands.remove(trials.pop(0)[1])
+            trials.pop(0)  # refused this round; asked again once another mechanism is in the model
         if not trials:
             break
         b, mech, tf = trials[0]

@@ -165,10 +165,13 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
         moved = np.abs(np.asarray(outputs_at(p2, at)) - ref) > 1e-9 * (np.abs(ref) + 1e-300)
         if k not in carried:  # the whole output, wherever it moves
             moved = np.repeat(np.any(moved, axis=1, keepdims=True), moved.shape[1], axis=1)
-        moved &= np.isfinite(value)
+        finite = np.isfinite(value)
+        moved &= finite
         blank |= moved
         for i in np.flatnonzero(moved.any(axis=1)):
-            why.setdefault(_OUT[i][1], (k, bool(moved[i].all())))
+            # a whole output (the column's note) unless the split of a carried pair moves it at some points only
+            whole = k not in carried or bool(moved[i][finite[i]].all())
+            why.setdefault(_OUT[i][1], (k, whole))
     noise = (doc.get("table", {}).get("noise") or doc.get("noise") or {})
     var = var + _model_error_variance(noise, value, table, disp)
     out = pd.DataFrame()
