@@ -56,11 +56,10 @@ def channel_costs(before, after) -> dict:
     (positive: ``after`` fits it worse)."""
     out = {}
     for c, r0 in before.table_residuals.items():
-        r1 = after.table_residuals.get(c)
-        s = np.asarray(before.table_sigma.get(c), dtype=float) if before.table_sigma.get(c) is not None else None
+        r1, s = after.table_residuals.get(c), before.table_sigma.get(c)
         if r1 is None or s is None:
             continue
-        r0, r1 = np.asarray(r0, dtype=float), np.asarray(r1, dtype=float)
+        r0, r1, s = (np.asarray(x, dtype=float) for x in (r0, r1, s))
         ok = np.isfinite(r0) & np.isfinite(r1) & np.isfinite(s) & (s > 0)
         if ok.any():
             out[c] = float(np.sum((r1[ok] ** 2 - r0[ok] ** 2) / s[ok] ** 2))

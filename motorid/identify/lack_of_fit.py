@@ -72,16 +72,17 @@ def structured_error(table, residuals: dict) -> dict:
 
 #: a model error of this share of a channel's residual mean square or more is told in the fit's warnings
 MODEL_ERROR_WARN_SHARE = 0.2
-_WORDS = {"torque": ("torque", "N·m", 1.0), "q_a": ("port A flow", "L/min", 6e4), "q_b": ("port B flow", "L/min", 6e4),
-          "q_case": ("case-drain flow", "L/min", 6e4)}
 
 
 def model_error_warnings(errors: dict) -> list:
     """The fit's words for each channel the model misses by structure (:func:`structured_error`)."""
+    from motorid.units import CHANNEL_WORDS, LPM_PER_M3S
+
     out = []
     for c, e in errors.items():
-        if e["sigma"] > 0 and e["share"] >= MODEL_ERROR_WARN_SHARE and c in _WORDS:
-            words, unit, f = _WORDS[c]
+        if e["sigma"] > 0 and e["share"] >= MODEL_ERROR_WARN_SHARE and c in CHANNEL_WORDS:
+            words = CHANNEL_WORDS[c]
+            unit, f = ("N·m", 1.0) if c == "torque" else ("L/min", LPM_PER_M3S)
             out.append(f"the model misses the table's {words} by structure, not noise: neighbouring points share "
                        f"{e['sigma'] * f:.3g} {unit} RMS of their residuals ({100 * e['share']:.0f} % of the scatter "
                        "about the model); the fitted values carry it, predict's confidence bands include it, and "

@@ -200,8 +200,8 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
     notes = [[note] if note else [] for _ in range(len(out))]
     for i, (c, col, _) in enumerate(_OUT):
         if col in where:
-            for j in np.flatnonzero(blank[i] & ~blank[i].all()):
-                notes[j].append(f"{col} empty: it depends on how {where[col]} and {_carried(doc)[where[col]]} "
+            for j in np.flatnonzero(blank[i]):
+                notes[j].append(f"{col} empty: it depends on how {where[col]} and {carried[where[col]]} "
                                 "share their sum here, which the fit did not determine")
 
     # at rest the torque lies anywhere within static friction, which a running fit does not give

@@ -436,13 +436,12 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         weak = _null_space(J, free) if free else {}
         if {"KL0", "KAB"} <= set(weak) and not any("KL0" in weak[k] or "KAB" in weak[k] for k in weak
                                                    if k not in ("KL0", "KAB")):
-            # the flows hold only K_L0 + K_AB (an efficiency sheet's inlet flow): K_L0 carries the sum
-            reasons["KAB"] = KAB_HELD_FOR_KL0
-            start["KL0"] = values["KL0"] + values["KAB"]
+            # the flows hold only K_L0 + K_AB (an efficiency sheet's inlet flow): K_L0 carries the sum, K_AB
+            # held at 0 (its reason set with the others' below)
+            values["KL0"] = start["KL0"] = values["KL0"] + values["KAB"]
             start["KAB"] = 0.0
-            weak = {k: v for k, v in weak.items() if k not in ("KL0", "KAB")}
+            weak = {k: v for k, v in weak.items() if k != "KL0"}
             weak["KAB"] = KAB_HELD_FOR_KL0
-            values["KL0"] = start["KL0"]
         if weak:
             for k in weak:
                 reasons[k] = weak[k]
