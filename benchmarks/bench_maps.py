@@ -12,6 +12,9 @@ fitted and asked to predict points it did not see:
   selects on the whole table (forward selection by BIC, discrepancy/tables.py)
   and, where diagnose leaves a channel unexplained with an empirical term, that
   term searched again on each fold's training points (discrepancy/table_terms.py);
+- ... + kriged model error: the residuals neighbouring training points share,
+  kriged to the points held out (identify/kriging.py; nothing far from the
+  training points, so extrapolation is the physics'); not yet used by `predict`;
 - Wilson, Schlösser, McCandlish–Dorey, Jeong, polynomial map (motorid/comparators/).
 
 Errors (motorid/comparators/evaluate.py): 5-fold held-out RMS, and the RMS when
@@ -173,7 +176,7 @@ def _real_maps():
 
 def _evaluate(name, table, spec, diagnose: bool, groups=None):
     from motorid.comparators import all_comparators
-    from motorid.comparators.evaluate import MotoridModel, held_out
+    from motorid.comparators.evaluate import MotoridModel, WithModelError, held_out
     from motorid.discrepancy.tables import diagnose_table
 
     t0 = time.time()
@@ -188,6 +191,10 @@ def _evaluate(name, table, spec, diagnose: bool, groups=None):
             model = (MotoridWithTerms(spec, dg["mechanisms"], groups=groups) if dg["unexplained"]
                      else MotoridModel(spec, dg["mechanisms"]))
             rows["motorid + diagnose"] = held_out(model, table, groups=groups)
+        # the model error the neighbours share, kriged between the training points (not yet in predict)
+        inner = model if found else MotoridModel(spec)
+        rows[("motorid + diagnose" if found else "motorid") + " + kriged model error"] = held_out(
+            WithModelError(inner), table, groups=groups)
     for m in all_comparators():
         rows[m.name] = held_out(m, table, groups=groups)
     return {"name": name, "rows": rows, "found": found, "seconds": time.time() - t0, "points": len(table),

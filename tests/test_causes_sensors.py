@@ -99,3 +99,35 @@ def test_a_torque_gain_named_at_one_back_pressure_says_what_its_value_rests_on()
     assert "told from K_F only by the torque's shaft-angle ripple" in _caveats(named, one)["torque_meter_gain"]
     assert _caveats(named, two) == {}
     assert _caveats([types.SimpleNamespace(mechanism=get("torque_offset"))], one) == {}
+
+
+def test_ripple_allowance_widens_the_gain_and_what_moves_with_it():
+    """The allowance for the model's ripple adds σ_r² = (tolerance·(1 + g))² to the gain's variance and
+    carries it along the fit's regression of each parameter on the gain: the spread of the others at a
+    given gain (the Schur complement) is unchanged, a parameter uncorrelated with the gain keeps its std."""
+    import types
+
+    from motorid.discrepancy.select import RIPPLE_MODEL_TOLERANCE, widen_for_the_ripple_model
+
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(4, 4))
+    C = A @ A.T * 1e-8
+    C[3, :3] = C[:3, 3] = 0.0  # the last parameter is uncorrelated with the others
+    free = ["KF", "torque_meter_gain.g", "TFc", "KL0"]
+    fit = types.SimpleNamespace(free=free, covariance=C.copy(), correlation=None,
+                                values={"torque_meter_gain.g": 0.02},
+                                std={k: float(np.sqrt(C[i, i])) for i, k in enumerate(free)})
+    widen_for_the_ripple_model(fit)
+    W = fit.covariance
+    sigma = RIPPLE_MODEL_TOLERANCE * 1.02
+    assert np.isclose(W[1, 1], C[1, 1] + sigma**2)
+    assert np.isclose(fit.std["torque_meter_gain.g"], np.sqrt(C[1, 1] + sigma**2))
+    others = [0, 2, 3]
+
+    def schur(M):
+        return M[np.ix_(others, others)] - np.outer(M[others, 1], M[1, others]) / M[1, 1]
+
+    assert np.allclose(schur(W), schur(C), rtol=1e-9, atol=1e-24)
+    assert fit.std["KL0"] == np.sqrt(C[3, 3])
+    assert fit.std["KF"] > np.sqrt(C[0, 0]) and fit.std["TFc"] > np.sqrt(C[2, 2])
+    assert np.allclose(np.diag(fit.correlation), 1.0)

@@ -152,6 +152,64 @@ class _FittedMotorid:
         return out
 
 
+class WithModelError:
+    """A model plus its model error kriged between the training points (:mod:`motorid.identify.kriging`):
+    the residuals neighbouring points share, interpolated; nothing where the neighbours share none,
+    nothing far from every training point (extrapolation is the model's alone)."""
+
+    reference = ("simple kriging of the residuals (Cressie 1993 §3.2), the model plus a discrepancy field "
+                 "(Kennedy & O'Hagan 2001)")
+
+    def __init__(self, inner, label: str | None = None):
+        self.inner = inner
+        self.name = label or f"{inner.name} + kriged model error"
+
+    def fit(self, table):
+        return self.fit_split(table, np.ones(len(table), bool))
+
+    def fit_split(self, table, train):
+        train = np.asarray(train, bool)
+        fitted = self.inner.fit_split(table, train) if hasattr(self.inner, "fit_split") else \
+            self.inner.fit(table.subset(train))
+        sub = table.subset(train)
+        pred = fitted.predict(sub)
+        residuals = {c: np.asarray(sub.measured[c], float) - np.asarray(pred[c], float) for c in CHANNELS}
+        return _FittedWithModelError(fitted, *model_error_fields(sub, residuals))
+
+
+def model_error_fields(table, residuals: dict) -> tuple:
+    """(scaling, {channel: ResidualKriging}) of the residuals of a fit on ``table`` (channels where the
+    neighbours show a model error and kriging predicts left-out points better than nothing)."""
+    from motorid.identify.kriging import Scaling, fit_residual_kriging, raw_coordinates
+    from motorid.identify.lack_of_fit import structured_error
+
+    scaling = Scaling(raw_coordinates(table))
+    X = scaling(raw_coordinates(table))
+    fields = {}
+    for c, e in structured_error(table, residuals).items():
+        if e["sigma"] > 0:
+            krig = fit_residual_kriging(X, residuals[c], e["sigma"])
+            if krig is not None:
+                fields[c] = krig
+    return scaling, fields
+
+
+class _FittedWithModelError:
+    def __init__(self, fitted, scaling, fields: dict):
+        self.fitted, self.scaling, self.fields = fitted, scaling, fields
+        self.fit = getattr(fitted, "fit", None)
+
+    def predict(self, table) -> dict:
+        from motorid.identify.kriging import raw_coordinates
+
+        out = dict(self.fitted.predict(table))
+        if self.fields:
+            X = self.scaling(raw_coordinates(table))
+            for c, krig in self.fields.items():
+                out[c] = np.asarray(out[c], float) + krig.predict(X)[0]
+        return out
+
+
 #: the parameters each channel needs identified before it is predicted
 PREDICTION_NEEDS = {"torque": ("Kv", "KF", "TFc"), "q_a": ("KL0",), "q_b": ("KL0",), "q_case": ("KL0",)}
 

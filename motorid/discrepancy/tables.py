@@ -280,6 +280,12 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             steps[-1]["held_out_gain"] = gains
             if not gains or max(gains.values()) < HELD_OUT_GAIN or min(gains.values()) < -HELD_OUT_COST:
                 break
+            why = setting_split_refusal(table, spec, current, mech)  # as the ΔBIC route asks (above)
+            if why is not None:
+                steps[-1]["refused"] = why
+                if progress:
+                    progress(f"{mech.id}: refused, it {why}")
+                break
             if progress:
                 progress(f"{mech.id}: ΔBIC {bic - b:.1f}; held out, it removes "
                          + ", ".join(f"{100 * g:.0f} % of the {c} error" for c, g in gains.items()))

@@ -303,7 +303,7 @@ def gauss_newton_start(problem: Problem, values: dict, free: list, reasons: dict
     mechs = problem.mechanisms
     for _ in range(8):
         backend = backend_for(problem, values, free, opt)
-        JtJ, Jtr, _ = backend.normal(values)
+        JtJ, Jtr, before = backend.normal(values)  # rᵀr: χ² at ``values``
         scales = parameter_scales(values, free, mechs)
         with np.errstate(over="ignore", invalid="ignore"):
             JtJ, Jtr = JtJ * np.outer(scales, scales), Jtr * scales
@@ -330,7 +330,7 @@ def gauss_newton_start(problem: Problem, values: dict, free: list, reasons: dict
                 # nonlinear one (a characteristic speed) must not jump to 0
                 new = max(new, 0.2 * values[k])
             trial[k] = new
-        before, after = backend.chi2(values), backend.chi2(trial)
+        after = backend.chi2(trial)
         if not np.all(np.isfinite(step)) or not np.isfinite(after) or after > before:
             break  # Gauss-Newton does not improve here: leave the rest to Levenberg-Marquardt
         values = trial

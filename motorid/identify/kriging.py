@@ -1,0 +1,151 @@
+"""The model error of a table fit, interpolated: simple kriging of the residuals over the operating space.
+
+A physical model that misses a real map by structure (:mod:`motorid.identify.lack_of_fit`) leaves
+residuals that neighbouring points share.  Between measured points that shared part can be
+predicted: the residual at a new point is estimated from those of its neighbours, weighted by how
+much a model error at that distance is shared (the best linear unbiased predictor of a zero-mean
+field: simple kriging, Cressie, *Statistics for Spatial Data*, 1993, §3.2; the model plus a
+discrepancy field as in Kennedy & O'Hagan, J. R. Stat. Soc. B 63 (2001) 425).  Far from every
+measured point the estimate falls back to zero: outside the map the physical model predicts
+alone, so extrapolation keeps what the physics knows.
+
+The field: a Matérn-3/2 covariance σ_m² (1 + √3 h/ℓ) e^{−√3 h/ℓ} in the scaled operating
+coordinates of :func:`~motorid.identify.lack_of_fit.operating_coordinates` (scaled by the training
+points' spread), plus independent noise σ_e².  σ_m² is the neighbours' estimate of
+:func:`~motorid.identify.lack_of_fit.structured_error`;
+ℓ and the ratio σ_e²/σ_m² those of the lowest leave-one-out error.  Each prediction uses its
+:data:`NEIGHBOURS` nearest training points (local kriging: tens of thousands of points cost
+seconds).  Where the neighbours show no model error, nothing is added.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: training points each prediction is kriged from
+NEIGHBOURS = 24
+#: correlation lengths tried, in units of the training points' spread along each axis
+LENGTHS = (0.03, 0.06, 0.12, 0.25, 0.5, 1.0)
+#: leave-one-out points used to choose the length (a seeded subsample of larger tables)
+LOO_POINTS = 1500
+
+
+def _matern32(h, length):
+    a = np.sqrt(3.0) * h / length
+    return (1.0 + a) * np.exp(-a)
+
+
+def raw_coordinates(table) -> np.ndarray:
+    """The operating-space axes of ``table`` before scaling: signed speed, signed ΔP, mean port pressure
+    above the case, log viscosity and (a variable unit) displacement."""
+    cols = [np.asarray(table.speed, float), np.asarray(table.dp, float),
+            0.5 * (np.asarray(table.p_a, float) + np.asarray(table.p_b, float)) - np.asarray(table.p_case, float),
+            np.log(np.maximum(np.asarray(table.viscosity, float), 1e-300))]
+    if getattr(table, "variable_displacement", False):
+        cols.append(np.asarray(table.displacement, float))
+    return np.column_stack(cols)
+
+
+class Scaling:
+    """Centre and spread of the training points' axes (an axis that does not vary there is dropped)."""
+
+    def __init__(self, raw: np.ndarray):
+        med = np.nanmedian(raw, axis=0)
+        raw = np.where(np.isfinite(raw), raw, med)
+        self.fill, self.mean, self.std = med, raw.mean(axis=0), raw.std(axis=0)
+        self.keep = self.std > 1e-12 * np.maximum(np.abs(raw).max(axis=0), 1e-300)
+
+    def __call__(self, raw: np.ndarray) -> np.ndarray:
+        raw = np.where(np.isfinite(raw), raw, self.fill)
+        return ((raw - self.mean) / np.where(self.keep, self.std, 1.0))[:, self.keep]
+
+    def as_dict(self) -> dict:
+        return {"fill": self.fill.tolist(), "mean": self.mean.tolist(), "std": self.std.tolist(),
+                "keep": self.keep.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Scaling":
+        out = cls.__new__(cls)
+        out.fill, out.mean, out.std = (np.asarray(d[k], float) for k in ("fill", "mean", "std"))
+        out.keep = np.asarray(d["keep"], bool)
+        return out
+
+
+class ResidualKriging:
+    """The kriged model error of one channel: ``predict(X)`` → (mean, variance) at scaled coordinates X."""
+
+    def __init__(self, X: np.ndarray, r: np.ndarray, sigma_m: float, sigma_e: float, length: float):
+        from scipy.spatial import cKDTree
+
+        self.X, self.r = np.asarray(X, float), np.asarray(r, float)
+        self.sigma_m, self.sigma_e, self.length = float(sigma_m), float(sigma_e), float(length)
+        self.tree = cKDTree(self.X)
+
+    def _weights(self, Xq, idx):
+        """Kriging weights of the neighbours ``idx`` (n × k) of the points Xq → (weights, c_q·weights)."""
+        s2, e2 = self.sigma_m**2, self.sigma_e**2
+        N = self.X[idx]  # n × k × d
+        dNN = np.linalg.norm(N[:, :, None, :] - N[:, None, :, :], axis=-1)
+        K = s2 * _matern32(dNN, self.length) + e2 * np.eye(idx.shape[1])
+        kq = s2 * _matern32(np.linalg.norm(N - Xq[:, None, :], axis=-1), self.length)
+        w = np.linalg.solve(K, kq[..., None])[..., 0]
+        return w, np.sum(w * kq, axis=1)
+
+    def predict(self, Xq: np.ndarray, chunk: int = 4096):
+        """(mean, variance of the model error) at the points Xq [SI of the channel, its square]."""
+        Xq = np.asarray(Xq, float)
+        k = min(NEIGHBOURS, len(self.X))
+        mean, var = np.zeros(len(Xq)), np.full(len(Xq), self.sigma_m**2)
+        for a in range(0, len(Xq), chunk):
+            q = Xq[a:a + chunk]
+            _, idx = self.tree.query(q, k=k)
+            idx = idx.reshape(len(q), k)
+            w, explained = self._weights(q, idx)
+            mean[a:a + chunk] = np.sum(w * self.r[idx], axis=1)
+            var[a:a + chunk] = np.maximum(self.sigma_m**2 - explained, 0.0)
+        return mean, var
+
+    def as_dict(self) -> dict:
+        return {"sigma_m": self.sigma_m, "sigma_e": self.sigma_e, "length": self.length}
+
+
+def _loo_error(X, r, sigma_m, sigma_e, length, rows) -> float:
+    """Mean squared leave-one-out error at ``rows`` (each kriged from its neighbours but itself)."""
+    krig = ResidualKriging(X, r, sigma_m, sigma_e, length)
+    k = min(NEIGHBOURS + 1, len(X))
+    _, idx = krig.tree.query(X[rows], k=k)
+    idx = idx.reshape(len(rows), k)
+    # itself out (a replicated point at distance 0 may come first or second)
+    others = np.array([[j for j in row if j != i][: k - 1] for i, row in zip(rows, idx)])
+    w, _ = krig._weights(X[rows], others)
+    return float(np.mean((r[rows] - np.sum(w * r[others], axis=1)) ** 2))
+
+
+#: noise-to-field variance ratios σ_e²/σ_m² tried beside the one the neighbours give
+NUGGET_RATIOS = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0)
+
+
+def fit_residual_kriging(X: np.ndarray, r: np.ndarray, sigma_m: float, seed: int = 0):
+    """The kriged model error of residuals ``r`` at scaled coordinates ``X`` (NaN: left out), with the
+    neighbours' model error ``sigma_m`` [SI]; None where there is none or too few points, or where no
+    length predicts left-out points better than zero does.  The length and the noise-to-field ratio
+    (that of the residuals' mean square beyond σ_m², or one of :data:`NUGGET_RATIOS`) are those of the
+    lowest leave-one-out error; the field's variance stays σ_m²."""
+    r = np.asarray(r, float)
+    ok = np.isfinite(r) & np.all(np.isfinite(X), axis=1)
+    X, r = np.asarray(X, float)[ok], r[ok]
+    if sigma_m <= 0 or len(r) < 10 or X.shape[1] == 0:
+        return None
+    ms = float(np.mean(r**2))
+    ratios = sorted({max(ms / sigma_m**2 - 1.0, 1e-3), *NUGGET_RATIOS})
+    rng = np.random.default_rng(seed)
+    rows = np.arange(len(r)) if len(r) <= LOO_POINTS else np.sort(rng.choice(len(r), LOO_POINTS, replace=False))
+    best, choice = float(np.mean(r[rows] ** 2)), None  # zero (the physics alone) to beat
+    for length in LENGTHS:
+        for ratio in ratios:
+            err = _loo_error(X, r, sigma_m, sigma_m * np.sqrt(ratio), length, rows)
+            if err < best:
+                best, choice = err, (length, ratio)
+    if choice is None:
+        return None
+    return ResidualKriging(X, r, sigma_m, sigma_m * np.sqrt(choice[1]), choice[0])
