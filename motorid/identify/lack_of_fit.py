@@ -13,15 +13,22 @@ noise e (independent), so E[r_i r_j] = E[m²] over pairs of nearest neighbours, 
 model is right.  This is the nugget-and-sill reading of a variogram at its shortest lag
 (Cressie, *Statistics for Spatial Data*, 1993, §2.3); replicated points (the same setting
 measured twice) are neighbours at distance 0 and give it exactly.  The mean of the products is
-taken as model error where it stands above twice its standard error, else 0.
+taken as model error where a permutation test (the same mean over shuffled residuals) says the
+neighbours share more than chance, else 0.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-#: the mean of the neighbours' products must exceed this many of its standard errors
-MODEL_ERROR_T = 2.0
+#: the neighbours' mean product must stand above this share of the same mean over shuffled residuals
+#: (a permutation test: no assumption on the noise's shape, heavy tails and noise growing with the
+#: reading included)
+MODEL_ERROR_ALPHA = 0.01
+#: shuffles of the permutation test
+MODEL_ERROR_PERMUTATIONS = 400
+#: neighbours of each point in the test's graph (more pairs than the nearest alone: more power)
+MODEL_ERROR_NEIGHBOURS = 4
 #: fewer points with a channel than this: no estimate
 MODEL_ERROR_MIN_POINTS = 10
 
@@ -44,29 +51,51 @@ def operating_coordinates(table) -> np.ndarray:
     return np.column_stack(out) if out else np.zeros((len(table), 0))
 
 
-def structured_error(table, residuals: dict) -> dict:
-    """channel → {"sigma": the model error's RMS [SI], "share": its share of the residuals' mean
-    square, "pairs": neighbour pairs used}; sigma 0 where the neighbours show none."""
+def _pairs(X: np.ndarray, k: int) -> np.ndarray:
+    """The pairs (i < j) of the ``k``-nearest-neighbour graph of the rows of X."""
     from scipy.spatial import cKDTree
 
+    k = min(k, len(X) - 1)
+    _, idx = cKDTree(X).query(X, k=k + 1)
+    i = np.repeat(np.arange(len(X)), k)
+    j = np.asarray(idx)[:, 1:].ravel()
+    pairs = np.unique(np.sort(np.column_stack([i, j]), axis=1), axis=0)
+    return pairs[pairs[:, 0] != pairs[:, 1]]
+
+
+def structured_error(table, residuals: dict, seed: int = 0) -> dict:
+    """channel → {"sigma": the model error's RMS [SI], "share": its share of the residuals' mean
+    square, "pairs": neighbour pairs used, "p_value": of the permutation test}; sigma 0 where the
+    neighbours show none.
+
+    Found where the mean product of the residuals of neighbouring points (the
+    :data:`MODEL_ERROR_NEIGHBOURS`-nearest graph) exceeds that of shuffled residuals at the
+    :data:`MODEL_ERROR_ALPHA` level; its size is the nearest pairs' mean product (the graph's where
+    that is not positive), at most the residuals' mean square."""
     X = operating_coordinates(table)
+    rng = np.random.default_rng(seed)
     out = {}
     for c, r in residuals.items():
         r = np.asarray(r, float)
         ok = np.flatnonzero(np.isfinite(r))
         if ok.size < MODEL_ERROR_MIN_POINTS or X.shape[1] == 0:
             continue
-        tree = cKDTree(X[ok])
-        _, idx = tree.query(X[ok], k=2)
-        pairs = np.unique(np.sort(np.column_stack([np.arange(ok.size), idx[:, 1]]), axis=1), axis=0)
-        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-        if len(pairs) < MODEL_ERROR_MIN_POINTS // 2:
+        x, y = X[ok], r[ok]
+        graph, nearest = _pairs(x, MODEL_ERROR_NEIGHBOURS), _pairs(x, 1)
+        if len(nearest) < MODEL_ERROR_MIN_POINTS // 2:
             continue
-        prod = r[ok][pairs[:, 0]] * r[ok][pairs[:, 1]]
-        mean, se = float(np.mean(prod)), float(np.std(prod, ddof=1) / np.sqrt(len(prod)))
-        ms = float(np.mean(r[ok] ** 2))
-        sigma = float(np.sqrt(min(mean, ms))) if mean > MODEL_ERROR_T * se and mean > 0 else 0.0
-        out[c] = {"sigma": sigma, "share": (sigma**2 / ms) if ms > 0 else 0.0, "pairs": int(len(pairs))}
+        stat = float(np.mean(y[graph[:, 0]] * y[graph[:, 1]]))
+        null = np.empty(MODEL_ERROR_PERMUTATIONS)
+        for b in range(MODEL_ERROR_PERMUTATIONS):
+            z = rng.permutation(y)
+            null[b] = np.mean(z[graph[:, 0]] * z[graph[:, 1]])
+        p = float((1 + np.sum(null >= stat)) / (1 + MODEL_ERROR_PERMUTATIONS))
+        ms = float(np.mean(y**2))
+        size = float(np.mean(y[nearest[:, 0]] * y[nearest[:, 1]]))
+        size = size if size > 0 else stat
+        sigma = float(np.sqrt(min(size, ms))) if p < MODEL_ERROR_ALPHA and size > 0 else 0.0
+        out[c] = {"sigma": sigma, "share": (sigma**2 / ms) if ms > 0 else 0.0, "pairs": int(len(graph)),
+                  "p_value": p}
     return out
 
 
