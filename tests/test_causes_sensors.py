@@ -88,7 +88,7 @@ def test_a_torque_gain_named_at_one_back_pressure_says_what_its_value_rests_on()
     gain says so; at two back pressures it does not."""
     import types
 
-    from motorid.discrepancy.select import _caveats
+    from motorid.discrepancy.verdicts import caveats as _caveats
     from motorid.physics.registry import get
 
     named = [types.SimpleNamespace(mechanism=get("torque_meter_gain"))]
@@ -107,7 +107,7 @@ def test_ripple_allowance_widens_the_gain_and_what_moves_with_it():
     given gain (the Schur complement) is unchanged, a parameter uncorrelated with the gain keeps its std."""
     import types
 
-    from motorid.discrepancy.select import RIPPLE_MODEL_TOLERANCE, widen_for_the_ripple_model
+    from motorid.discrepancy.verdicts import RIPPLE_MODEL_TOLERANCE, widen_for_the_ripple_model
 
     rng = np.random.default_rng(3)
     A = rng.normal(size=(4, 4))
@@ -131,3 +131,61 @@ def test_ripple_allowance_widens_the_gain_and_what_moves_with_it():
     assert fit.std["KL0"] == np.sqrt(C[3, 3])
     assert fit.std["KF"] > np.sqrt(C[0, 0]) and fit.std["TFc"] > np.sqrt(C[2, 2])
     assert np.allclose(np.diag(fit.correlation), 1.0)
+
+
+def test_rejections_that_crowd_at_one_shaft_angle_are_given_back_as_structure():
+    """A valve-plate notch repeats in the same few degrees of every piston pitch: the running median
+    takes each repeat for a spike.  Rejections crowded far beyond chance in a bin of the angle within a
+    pitch (or of the shaft angle) are structure and given back; spikes at random angles are not."""
+    from motorid.identify.noise import shaft_locked
+
+    rng = np.random.default_rng(0)
+    theta = np.cumsum(np.full(40_000, 0.0137))  # uneven against the pitch: every angle visited
+    pitch = 2 * np.pi / 9
+    in_notch = np.mod(theta, pitch) < np.deg2rad(3.0)
+    random_spikes = rng.random(theta.size) < 0.002
+    back = shaft_locked(in_notch | random_spikes, theta, 9)
+    assert back[in_notch].mean() > 0.95  # the notch: given back
+    elsewhere = random_spikes & ~in_notch  # the spikes elsewhere stay rejected (but for the notch's bin edges)
+    assert back[elsewhere].sum() <= 0.05 * elsewhere.sum()
+    assert not shaft_locked(random_spikes, theta, 9).any()  # spikes alone: nothing given back
+
+
+def test_a_displacement_error_and_a_torque_gain_that_cancel_in_the_torque_are_neither_named():
+    """A zero-mean valve-plate notch met only between slow samples (aliased) reads as flow 2.25 % above
+    the swept flow at every sampled angle while the torque is exact: the selection named a displacement
+    error of +2.25 % and a torque gain of −2.32 % (a second reader's simulator).  The pair says only that
+    the flows read off: both refused, with the names kept before them."""
+    import types
+
+    from motorid.discrepancy.verdicts import refuse_cancelling_pair
+    from motorid.physics.registry import get
+
+    def cand(mid, values):
+        return types.SimpleNamespace(mechanism=get(mid), fit=types.SimpleNamespace(values=values), step_entry={})
+
+    first = cand("stribeck_friction", {})
+    values = {"displacement_error.eps": 0.0225, "torque_meter_gain.g": -0.0232}
+    accepted = [first, cand("displacement_error", values), cand("torque_meter_gain", values)]
+    refused = []
+    kept, current = refuse_cancelling_pair(accepted, "current", "base", refused, lambda m: None)
+    assert kept == [first] and current is first.fit
+    assert {r["id"] for r in refused} == {"displacement_error", "torque_meter_gain"}
+    assert "cancel in the torque" in refused[0]["why"]
+    # a torque gain that does not undo the displacement error: both kept
+    values2 = {"displacement_error.eps": 0.0225, "torque_meter_gain.g": 0.01}
+    both = [cand("displacement_error", values2), cand("torque_meter_gain", values2)]
+    assert refuse_cancelling_pair(both, "current", "base", [], lambda m: None) == (both, "current")
+
+
+def test_a_lagging_meter_is_described_at_the_order_its_own_ripple_has():
+    """The case drain ripples with K_L(θ), at the piston order; the torque and port flows with S(θ), at
+    twice it for an odd piston count (a second reader: the case meter's lag was quoted at the 18×)."""
+    from motorid.model import MotorSpec
+    from motorid.physics.registry import get
+
+    nine = MotorSpec("x", 9, 80e-6, 0.005)
+    assert "its 9× shaft-order ripple" in get("sensor_lag_q_case").describe({"sensor_lag_q_case.tau": 0.01}, nine)
+    assert "its 18× shaft-order ripple" in get("sensor_lag_q_a").describe({"sensor_lag_q_a.tau": 0.01}, nine)
+    eight = MotorSpec("y", 8, 80e-6, 0.005)
+    assert "its 8× shaft-order ripple" in get("sensor_lag_torque").describe({"sensor_lag_torque.tau": 0.01}, eight)

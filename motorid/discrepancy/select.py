@@ -34,6 +34,7 @@ from motorid._aot import cached_jit, trim_heap
 from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
 from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen
 from motorid.discrepancy.unexplained import extrapolation_check
+from motorid.discrepancy.verdicts import caveats, refuse_cancelling_pair, ripple_gain_only, widen_for_the_ripple_model
 from motorid.identify.least_squares import fit_least_squares
 from motorid.identify.types import FitOptions, FitResult
 from motorid.physics.registry import all_mechanisms
@@ -186,6 +187,18 @@ def _prediction_starts(current: dict, mech, dataset=None) -> list:
     return _starts(current, mech, dataset) + [{**current, **mech.neutral()}]
 
 
+def _pool():
+    """Threads that screen candidates two at a time (their compiled programs run outside Python's lock;
+    each candidate's numbers are the same whatever the order); one where the machine has one core, or as
+    many as ``MOTORID_DIAGNOSE_THREADS`` says."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    n = os.environ.get("MOTORID_DIAGNOSE_THREADS")
+    workers = int(n) if n and n.isdigit() and int(n) > 0 else min(2, os.cpu_count() or 1)
+    return ThreadPoolExecutor(max_workers=workers)
+
+
 def _screen_candidates(screen, catalog, current_mechs, current, channels, dataset, n_res, say,
                        wandering: dict | None = None) -> list:
     """Every catalog mechanism that shows where structure was found, ranked by the χ² a
@@ -200,18 +213,27 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
             if m not in current_mechs and channels & set(getattr(m, "shows_in", m.channels))
             and not set(m.channels) & set(wandering or {})
             and getattr(m, "seen_by", lambda ds: True)(dataset)]  # e.g. pump-mode law: no pump runs
-    predicted = []
-    for mech in bar(todo, desc="candidates (linear update)", unit="mechanism"):
-        chi2 = screen.predicted_chi2(current_mechs + [mech], _prediction_starts(current.params_all, mech, dataset))
-        predicted.append((current.chi2 - chi2, mech))
+
+    def rank(mech):
+        return screen.predicted_chi2(current_mechs + [mech], _prediction_starts(current.params_all, mech, dataset))
+
+    with _pool() as pool:  # candidates are independent: two at a time where the machine has the cores
+        chi2s = list(bar(pool.map(rank, todo), total=len(todo), desc="candidates (linear update)", unit="mechanism"))
+    predicted = [(current.chi2 - chi2, mech) for chi2, mech in zip(chi2s, todo)]
     predicted.sort(key=lambda x: -x[0])
     top = predicted[0][0] if predicted else 0.0
     chosen = [m for i, (d, m) in enumerate(predicted) if i < SCREEN_FIT_AT_LEAST or d >= SCREEN_FIT_SHARE * top]
     fitted, ranked = [], []
     abs_dp = np.abs(np.asarray(dataset.running.p_a, dtype=float) - np.asarray(dataset.running.p_b, dtype=float))
-    for mech in bar(chosen, desc="candidates (fit on the cells)", unit="mechanism"):
+    def fit_one(mech):
         fit = screen.fit_best_start(current_mechs + [mech], _starts(current.params_all, mech, dataset))
         cached_jit.release(mech)  # its compiled programs: memory does not grow with the catalog
+        return fit
+
+    with _pool() as pool:
+        fits = list(bar(pool.map(fit_one, chosen), total=len(chosen), desc="candidates (fit on the cells)",
+                        unit="mechanism"))
+    for mech, fit in zip(chosen, fits):
         beyond = mech.outside_data(fit.values, abs_dp)
         if beyond is not None:  # a threshold fitted past every run: its tail stands in for another law
             say(f"{mech.id} left out: {beyond}")
@@ -459,6 +481,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         accepted, current = _recheck_provisional(accepted, screen, current_cells, base, refused, say)
         current_mechs = [c.mechanism for c in accepted]
         lap("operating regions on the cells")
+    accepted, current = refuse_cancelling_pair(accepted, current, base, refused, say)
+    current_mechs = [c.mechanism for c in accepted]
     # a name refused while a second effect was still missing, kept once that was in the model
     kept = {c.mechanism.id for c in accepted}
     refused = list({r["id"]: r for r in refused if r["id"] not in kept}.values())  # asked twice: the last word
@@ -472,7 +496,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         c.fit = c.cells = None
     trim_heap()
     final = fit_least_squares(dataset, spec, current_mechs, initial=start) if accepted else base
-    if _ripple_gain_only(accepted, dataset):
+    if ripple_gain_only(accepted, dataset):
         widen_for_the_ripple_model(final)
     lap("final fit")
     loc_after = locate(final, dataset, spec, alpha=alpha, min_effect=min_effect) if accepted else loc0
@@ -483,63 +507,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     return Diagnosis(mismatch=bool(accepted or unexplained), base=base, final=final, accepted=accepted,
                      location_before=loc0, location_after=loc_after, steps=steps, unexplained=unexplained,
                      refused=refused, unexplained_detail=detail, seconds=seconds,
-                     caveats=_caveats(accepted, dataset))
-
-
-#: where a torque gain is told from K_F by the shaft-angle ripple alone, the share of the ripple's size
-#: by which the model's ripple (MODEL.md's ideal kinematics, S(θ)) may be off: two implementations of the
-#: same equations, cell-averaged differently, differ by 0.1-0.3 % (a second reader's simulator); a real
-#: motor's valve-plate timing by more, which the caveat says
-RIPPLE_MODEL_TOLERANCE = 0.005
-
-
-def _ripple_gain_only(accepted: list, dataset) -> bool:
-    """A torque gain is named and every running sample has its low-pressure port at one pressure."""
-    from motorid.physics.sensors import one_back_pressure
-
-    s = getattr(dataset, "running", None)
-    return bool(s is not None and np.size(s.speed) and any(c.mechanism.id == "torque_meter_gain" for c in accepted)
-                and one_back_pressure(np.minimum(np.asarray(s.p_a, float), np.asarray(s.p_b, float))))
-
-
-def widen_for_the_ripple_model(final: FitResult, name: str = "torque_meter_gain.g",
-                               tolerance: float = RIPPLE_MODEL_TOLERANCE) -> None:
-    """Add to ``final``'s covariance the error a ripple held ``tolerance`` wrong gives a value read from the
-    ripple's size: σ_r = tolerance·(1 + g) on ``name``, carried to every parameter correlated with it as the
-    fit carries a shift of ``name`` (C ← C + σ_r² b bᵀ, b = C[:, g] / C_gg: the regression of each
-    parameter on it); std and correlation follow."""
-    if name not in final.free or final.covariance is None:
-        return
-    C = np.asarray(final.covariance, dtype=float)
-    i = final.free.index(name)
-    if not (np.all(np.isfinite(C)) and C[i, i] > 0):
-        return
-    b = C[:, i] / C[i, i]
-    sigma = tolerance * (1.0 + float(final.values.get(name) or 0.0))
-    C = C + sigma**2 * np.outer(b, b)
-    final.covariance = C
-    d = np.sqrt(np.maximum(np.diag(C), 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        final.correlation = C / np.outer(d, d)
-    for j, k in enumerate(final.free):
-        if final.std.get(k) is not None:
-            final.std[k] = float(d[j])
-
-
-def _caveats(accepted: list, dataset) -> dict:
-    """What a named value rests on where that is fragile: a torque gain at one back pressure is told from
-    K_F (K_F·D·(P_A+P_B) is then K_F·D·|ΔP| plus a constant) by the shaft-angle torque ripple alone, so a
-    ripple the model holds a little wrong moves it (a second reader's simulator: −7σ of the fit's own std;
-    :func:`widen_for_the_ripple_model` adds :data:`RIPPLE_MODEL_TOLERANCE` of the ripple to it)."""
-    out = {}
-    if _ripple_gain_only(accepted, dataset):
-        out["torque_meter_gain"] = (
-            "every running sample has its low-pressure port at one pressure: the gain is told from K_F only by "
-            "the torque's shaft-angle ripple, so its value (and K_F's, T_Fc's) rests on the model's ripple; "
-            f"their std include {100 * RIPPLE_MODEL_TOLERANCE:.1f} % of the ripple's size for the ideal "
-            "kinematics, a real motor's valve-plate timing may move them further; runs at a second back "
-            "pressure determine the gain")
-    return out
+                     caveats=caveats(accepted, dataset))
 
 
 def _rms(ls: FitResult, c: str):

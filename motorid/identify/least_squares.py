@@ -23,7 +23,8 @@ from motorid import model
 from motorid.identify.covariance import breakaway_sandwich, covariance_from_normal, viscosity_covariance
 from motorid.identify.identifiability import at_bound_warning, coverage_reasons, tfc_carries_kf_warning
 from motorid.identify.noise import correlation_threshold, correlation_times
-from motorid.identify.noise import breakaway_noise, floor_noise, initial_noise, residual_noise, spikiness
+from motorid.identify.noise import (breakaway_noise, floor_noise, initial_noise, residual_noise, shaft_locked,
+                                    spikiness)
 from motorid.identify.problem import Problem
 from motorid.identify.run_scatter import widen_by_run_scatter
 from motorid.identify.solver import backend_for, gauss_newton_start, solve
@@ -74,6 +75,8 @@ class _Noise:
             ev = data.events
             self.x2 = np.asarray(ev.p_a, dtype=float) ** 2 + np.asarray(ev.p_b, dtype=float) ** 2
         self.inliers = {c: np.isfinite(v) for c, v in obs.items()}
+        self.theta = np.asarray(data.running.theta, dtype=float) if problem.has_running else np.zeros(0)
+        self.pistons = int(getattr(problem.spec, "pistons", 1) or 1)
         if opt.fixed_noise is not None:
             self.runs = {c: np.asarray(opt.fixed_noise[c], dtype=float) for c in self.runs}
             self.breakaway = opt.fixed_noise.get("breakaway", self.breakaway)
@@ -92,6 +95,8 @@ class _Noise:
             if opt.fixed_noise is not None:
                 new_inliers[c] = np.isfinite(obs[c]) & (np.abs(spikiness(res[c], run_of, c)) <= opt.outlier_sigma * (
                     self.breakaway if c == "breakaway" else self.runs[c][run_of]))
+                if c != "breakaway":
+                    new_inliers[c] |= shaft_locked(np.isfinite(obs[c]) & ~new_inliers[c], self.theta, self.pistons)
             elif c == "breakaway":
                 self._update_breakaway(obs[c], r, free, first)
                 new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * self.breakaway)
@@ -99,6 +104,7 @@ class _Noise:
                 self.runs[c] = floor_noise(residual_noise(r, run_of, self.n_runs, robust=first), obs[c])
                 new_inliers[c] = np.isfinite(obs[c]) & (
                     np.abs(spikiness(res[c], run_of, c)) <= opt.outlier_sigma * self.runs[c][run_of])
+                new_inliers[c] |= shaft_locked(np.isfinite(obs[c]) & ~new_inliers[c], self.theta, self.pistons)
         stable = all(np.array_equal(new_inliers[c], self.inliers[c]) for c in obs)
         self.inliers = new_inliers
         return stable

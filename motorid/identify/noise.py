@@ -104,6 +104,40 @@ def spikiness(res, run_of, channel: str) -> np.ndarray:
     return res - med
 
 
+#: bins of the shaft angle (and of the angle within a piston pitch) in which rejected samples are counted
+LOCKED_BINS = 36
+#: a bin holds structure where its rejected samples exceed what their share of all samples gives by this
+#: many Poisson standard deviations (and by at least 5 samples) ...
+LOCKED_SIGMAS = 6.0
+#: ... and such bins hold at least this share of a channel's rejected samples
+LOCKED_SHARE = 0.5
+
+
+def shaft_locked(rejected, theta, pistons: int) -> np.ndarray:
+    """The rejected samples that are not spikes but structure: those in the bins of the shaft angle (or of
+    the angle within a piston pitch) where rejections crowd far beyond chance → bool mask (True: give
+    back).  A spike of the electronics falls at any angle; a valve-plate notch, a port-timing pulse, a
+    bearing defect repeats at its angle, and the running median of five samples takes each repeat for a
+    spike (a second reader's notch of 3° per pitch: every sample in it rejected, and the flow the rest
+    left behind named a displacement error).  Given back, it is the discrepancy search's to locate."""
+    rejected = np.asarray(rejected, bool)
+    out = np.zeros(rejected.shape, bool)
+    n_rej = int(rejected.sum())
+    theta = np.asarray(theta, float)
+    if n_rej < 30 or theta.shape != rejected.shape:
+        return out
+    ok = np.isfinite(theta)
+    for period in (2 * np.pi / max(int(pistons), 1), 2 * np.pi):  # a pitch's finer bins first
+        b = np.minimum((np.mod(np.where(ok, theta, 0.0), period) / period * LOCKED_BINS).astype(int), LOCKED_BINS - 1)
+        share = np.bincount(b[ok], minlength=LOCKED_BINS) / max(int(ok.sum()), 1)
+        counts = np.bincount(b[rejected & ok], minlength=LOCKED_BINS)
+        expected = n_rej * share
+        locked = counts > expected + np.maximum(LOCKED_SIGMAS * np.sqrt(expected), 5.0)
+        if counts[locked].sum() >= LOCKED_SHARE * n_rej:
+            return rejected & ok & locked[b]
+    return out
+
+
 def residual_noise(res, run_of_sample, n_runs, robust: bool) -> np.ndarray:
     """σ per run from the residuals about the run's centre.
 

@@ -337,7 +337,9 @@ class SensorLag(CatalogMechanism):
         word = _METER_WORDS[self.channel]
         text = f"the {word} lags with a time constant of {tau * 1e3:.3g} ms"
         if spec is not None:
-            k = 2 * spec.pistons if spec.pistons % 2 else spec.pistons
+            # the case drain ripples with K_L(θ), at the piston order; torque and port flows with S(θ), whose
+            # first harmonic is at 2n for odd n
+            k = spec.pistons if self.channel == "q_case" or spec.pistons % 2 == 0 else 2 * spec.pistons
             w = 1000 * RAD_S_PER_RPM
             x = k * w * tau
             text += (f": at 1000 rpm its {k}× shaft-order ripple reads {100 / math.sqrt(1 + x * x):.3g} % of its "
