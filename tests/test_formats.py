@@ -306,6 +306,25 @@ def test_gridded_mat_loss_map_gives_one_row_per_point(version, tmp_path):
         standard_table(bad, load_channel_map(tmp_path / "map.toml"))
 
 
+def test_a_square_grid_read_with_its_axes_swapped_is_refused_naming_the_axes(tmp_path):
+    """A square grid (as many speeds as pressures) cannot tell its axes apart by shape: read the wrong
+    way round its flows contradict the swept flow, and the refusal blamed a unit alone (a second reader);
+    it now names the [grid] axes too."""
+    from scipy.io import savemat
+
+    from motorid.io.tables import read_tables
+
+    speed = np.linspace(500.0, 3000.0, 4)  # rpm
+    dp = np.linspace(50.0, 350.0, 4)  # bar
+    torque = np.outer(np.ones(4), dp) * 80e-6 * 1e5 / (2 * np.pi) * 0.95
+    flow = np.outer(speed, np.ones(4)) * 80e-3 * 1.02  # L/min
+    path = tmp_path / "map.mat"
+    savemat(path, {"map": {"n": speed, "dp": dp, "T": torque.T, "Q": flow.T}})  # the maker's rows: ΔP
+    (tmp_path / "map.toml").write_text(GRID_MAP.replace('convention = "pump"\n', ""))
+    with pytest.raises(InputError, match=r"\[grid\] axes in the wrong order"):
+        read_tables([path], load_motor_spec(MOTOR), channels=tmp_path / "map.toml")
+
+
 # --------------------------------------------------------------------------- bad files, bad maps
 
 def _cli_fails(args, capsys):
@@ -564,6 +583,33 @@ def test_a_units_row_under_the_header_is_skipped(kind, tmp_path):
     table = read_tables([path], spec, channels=cmap)
     np.testing.assert_allclose(table.measured["torque"], [170.5, 290.25])
     np.testing.assert_allclose(table.speed, np.array([1000, 2000]) * 2 * np.pi / 60)
+
+
+def test_a_workbook_of_numbers_stored_as_text_with_decimal_commas(tmp_path):
+    """A German workbook whose cells are text ('-2,0', '1.002,5'): [file] decimal = "," reads them as
+    numbers (it was accepted and ignored: "'-2,0' is not a number"); a column of other text is left as
+    it is, and without the key the text is refused as before."""
+    from openpyxl import Workbook
+
+    from motorid.io.tables import read_tables
+
+    spec = load_motor_spec(MOTOR)
+    wb = Workbook()
+    for r in (["n", "pA", "pB", "M", "Bem"], ["1.000", "150,0", "0", "170,5", "ok"], ["-2.000,5", "250", "0", "-290,25", "ok"]):
+        wb.active.append(r)
+    path = tmp_path / "messung.xlsx"
+    wb.save(path)
+    text = ('[constants]\noil_temp_C = 50.0\n[channels]\nspeed_rpm = {name = "n", unit = "rpm"}\n'
+            'p_a_bar = {name = "pA", unit = "bar"}\np_b_bar = {name = "pB", unit = "bar"}\n'
+            'torque_Nm = {name = "M", unit = "N*m"}\n')
+    cmap = tmp_path / "messung.toml"
+    cmap.write_text('[file]\ndecimal = ","\n' + text)
+    table = read_tables([path], spec, channels=cmap)
+    np.testing.assert_allclose(table.measured["torque"], [170.5, -290.25])
+    np.testing.assert_allclose(table.speed, np.array([1000.0, -2000.5]) * 2 * np.pi / 60)
+    cmap.write_text(text)
+    with pytest.raises(InputError, match="not a number"):
+        read_tables([path], spec, channels=cmap)
 
 
 @pytest.mark.parametrize("kind", ["hdf5", "csv"])

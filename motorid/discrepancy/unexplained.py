@@ -197,7 +197,9 @@ def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = 
             masks = {k: np.asarray(v)[run_of][ok] for k, v in regions.items()}
             term = propose(c, x, np.asarray(final.residuals[c])[ok], np.asarray(final.sigma[c])[ok], run_of[ok],
                            spec, regions=masks)
-            if term is not None and term.held_out_gain > 0.05:
+            regions_ok = not term or not term.region_gain or (
+                np.mean(list(term.region_gain.values())) > 0.0 and min(term.region_gain.values()) > -0.25)
+            if term is not None and term.held_out_gain > 0.05 and regions_ok:  # as a table's term must
                 entry["empirical_term"] = term.as_dict()
                 entry["description"] += f". Proposed empirical term (not a named mechanism): {term.formula}"
         entries.append(entry)

@@ -100,9 +100,35 @@ def _workbook(path: Path, options: dict) -> _Columns:
     frames = [pd.read_excel(path, sheet_name=sheet, header=header, skiprows=skip or None, engine="openpyxl")
               .assign(sheet=sheet if isinstance(sheet, str) else names[sheet]) for sheet in chosen]
     frame = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+    if options.get("decimal") == ",":  # numbers a German workbook stores as text: "-2,0", "1.002,5"
+        for col in frame.columns:
+            if not pd.api.types.is_numeric_dtype(frame[col]):
+                frame[col] = _comma_numbers(frame[col])
     label = ", ".join(str(f["sheet"].iloc[0]) if len(f) else "?" for f in frames)
     return _Columns(path, frame, where=f"sheet {label}" + ("" if len(names) == 1 else
                                                            f"; the workbook's sheets: {', '.join(names)}"))
+
+
+def _comma_numbers(column: pd.Series) -> pd.Series:
+    """A column whose text cells are all numbers with a decimal comma (and '.' as thousands), as floats;
+    numeric cells kept; any other text: the column unchanged."""
+    out = []
+    for v in column:
+        if isinstance(v, str):
+            t = v.strip().replace(".", "").replace(",", ".")
+            if not t:
+                out.append(np.nan)
+                continue
+            try:
+                out.append(float(t))
+            except ValueError:
+                return column
+        else:
+            out.append(v)
+    try:
+        return pd.Series(out, index=column.index, dtype=float)
+    except (TypeError, ValueError):  # a date, a bool: not a column of numbers
+        return column
 
 
 # --------------------------------------------------------------------------- text

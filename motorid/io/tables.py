@@ -423,7 +423,14 @@ def read_tables(paths, spec=None, require_outputs: bool = True, channels=None) -
         if require_outputs:
             from motorid.io.table_checks import check_against_ideal
 
-            check_against_ideal(out[-1], p)
+            try:
+                check_against_ideal(out[-1], p)
+            except InputError as exc:
+                cmap = _table_map(channels if channels is not None else find_channel_map(p))
+                if cmap is not None and cmap.grid_axes:  # a square grid cannot tell its axes apart by shape
+                    raise InputError(f"{exc}; or the [grid] axes in the wrong order (axes = "
+                                     f"{list(cmap.grid_axes)!r}: the first indexes the matrices' rows)") from None
+                raise
     return concat_tables(out)
 
 
