@@ -180,11 +180,12 @@ class WithModelError:
 def model_error_fields(table, residuals: dict) -> tuple:
     """(scaling, {channel: ResidualKriging}) of the residuals of a fit on ``table`` (channels where the
     neighbours show a model error and kriging predicts left-out points better than nothing)."""
-    from motorid.identify.kriging import Scaling, fit_residual_kriging, raw_coordinates
-    from motorid.identify.lack_of_fit import structured_error
+    from motorid.identify.kriging import fit_residual_kriging
+    from motorid.identify.lack_of_fit import AxisScaling, operating_axes, structured_error
 
-    scaling = Scaling(raw_coordinates(table))
-    X = scaling(raw_coordinates(table))
+    axes = operating_axes(table)
+    scaling = AxisScaling(axes)
+    X = scaling(axes)
     fields = {}
     for c, e in structured_error(table, residuals).items():
         if e["sigma"] > 0:
@@ -200,11 +201,11 @@ class _FittedWithModelError:
         self.fit = getattr(fitted, "fit", None)
 
     def predict(self, table) -> dict:
-        from motorid.identify.kriging import raw_coordinates
+        from motorid.identify.lack_of_fit import operating_axes
 
         out = dict(self.fitted.predict(table))
         if self.fields:
-            X = self.scaling(raw_coordinates(table))
+            X = self.scaling(operating_axes(table))
             for c, krig in self.fields.items():
                 out[c] = np.asarray(out[c], float) + krig.predict(X)[0]
         return out

@@ -346,6 +346,18 @@ def fold_labels(run_of, folds: int) -> np.ndarray:
     return (np.arange(runs.size) % folds)[inverse]
 
 
+#: a term may lose at most this share of a region's held-out χ² where it was not fitted (fitted on the
+#: upper half, a small term may lose a little to the noise below)
+REGION_LOSS_LIMIT = -0.25
+
+
+def regions_hold(region_gain: dict) -> bool:
+    """Whether a term's where-not-fitted gains (:func:`region_gains`) average above zero with none below
+    :data:`REGION_LOSS_LIMIT` (no regions to split: nothing against it)."""
+    gains = list(region_gain.values())
+    return not gains or (float(np.mean(gains)) > 0.0 and min(gains) > REGION_LOSS_LIMIT)
+
+
 def region_gains(Z, y, k: int, idx: list, regions: dict) -> dict:
     """Where-not-fitted check: for each region split (name (first, second) → mask, True: first) and
     each way round, the fraction of the held-out part's residual χ² that the columns ``idx`` remove

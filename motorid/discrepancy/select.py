@@ -225,6 +225,7 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
     chosen = [m for i, (d, m) in enumerate(predicted) if i < SCREEN_FIT_AT_LEAST or d >= SCREEN_FIT_SHARE * top]
     fitted, ranked = [], []
     abs_dp = np.abs(np.asarray(dataset.running.p_a, dtype=float) - np.asarray(dataset.running.p_b, dtype=float))
+
     def fit_one(mech):
         fit = screen.fit_best_start(current_mechs + [mech], _starts(current.params_all, mech, dataset))
         cached_jit.release(mech)  # its compiled programs: memory does not grow with the catalog

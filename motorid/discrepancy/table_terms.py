@@ -24,7 +24,8 @@ import types
 import numpy as np
 
 from motorid.comparators.evaluate import CHANNELS, MotoridModel
-from motorid.discrepancy.empirical import EmpiricalTerm, cv_sse, fold_labels, nuisance, propose, region_gains
+from motorid.discrepancy.empirical import (EmpiricalTerm, cv_sse, fold_labels, nuisance, propose, region_gains,
+                                          regions_hold)
 from motorid.discrepancy.locate import CHANNEL_WORDS
 
 #: folds over the training points (or their recordings) of the term search
@@ -106,8 +107,7 @@ def search(channel: str, table, residual, sigma, where, spec, groups=None):
         terms = term.terms[:k]
         gain, regions, coef = _checked(channel, x, r * w, w, fold, terms, spec)
         outward = [v for name, v in regions.items() if name.startswith("fit on low")]
-        if (gain >= MIN_GAIN and outward and min(outward) > 0.0 and np.mean(list(regions.values())) > 0.0
-                and min(regions.values()) > -0.25):
+        if gain >= MIN_GAIN and outward and min(outward) > 0.0 and regions_hold(regions):
             terms = [(t, float(c)) for (t, _), c in zip(terms, coef)]
             # its size: how far it moves the fitted curve (the base model's own shapes refitted with
             # and without it), not the term alone, which a shape it shares with them would inflate

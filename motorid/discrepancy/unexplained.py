@@ -145,7 +145,7 @@ def _fmt(v, channel):
 
 def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = True) -> list:
     """One entry per channel with structure left: words, numbers and an empirical term where one holds."""
-    from motorid.discrepancy.empirical import propose
+    from motorid.discrepancy.empirical import propose, regions_hold
     from motorid.discrepancy.run_offsets import flow_balance, run_spread
 
     by_channel: dict = {}
@@ -197,9 +197,7 @@ def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = 
             masks = {k: np.asarray(v)[run_of][ok] for k, v in regions.items()}
             term = propose(c, x, np.asarray(final.residuals[c])[ok], np.asarray(final.sigma[c])[ok], run_of[ok],
                            spec, regions=masks)
-            regions_ok = not term or not term.region_gain or (
-                np.mean(list(term.region_gain.values())) > 0.0 and min(term.region_gain.values()) > -0.25)
-            if term is not None and term.held_out_gain > 0.05 and regions_ok:  # as a table's term must
+            if term is not None and term.held_out_gain > 0.05 and regions_hold(term.region_gain):  # as on a table
                 entry["empirical_term"] = term.as_dict()
                 entry["description"] += f". Proposed empirical term (not a named mechanism): {term.formula}"
         entries.append(entry)

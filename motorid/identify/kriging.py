@@ -10,8 +10,8 @@ measured point the estimate falls back to zero: outside the map the physical mod
 alone, so extrapolation keeps what the physics knows.
 
 The field: a Matérn-3/2 covariance σ_m² (1 + √3 h/ℓ) e^{−√3 h/ℓ} in the scaled operating
-coordinates of :func:`~motorid.identify.lack_of_fit.operating_coordinates` (scaled by the training
-points' spread), plus independent noise σ_e².  σ_m² is the neighbours' estimate of
+coordinates of :func:`~motorid.identify.lack_of_fit.operating_axes` (scaled by the training points'
+spread, :class:`~motorid.identify.lack_of_fit.AxisScaling`), plus independent noise σ_e².  σ_m² is the neighbours' estimate of
 :func:`~motorid.identify.lack_of_fit.structured_error`;
 ℓ and the ratio σ_e²/σ_m² those of the lowest leave-one-out error.  Each prediction uses its
 :data:`NEIGHBOURS` nearest training points (local kriging: tens of thousands of points cost
@@ -33,42 +33,6 @@ LOO_POINTS = 1500
 def _matern32(h, length):
     a = np.sqrt(3.0) * h / length
     return (1.0 + a) * np.exp(-a)
-
-
-def raw_coordinates(table) -> np.ndarray:
-    """The operating-space axes of ``table`` before scaling: signed speed, signed ΔP, mean port pressure
-    above the case, log viscosity and (a variable unit) displacement."""
-    cols = [np.asarray(table.speed, float), np.asarray(table.dp, float),
-            0.5 * (np.asarray(table.p_a, float) + np.asarray(table.p_b, float)) - np.asarray(table.p_case, float),
-            np.log(np.maximum(np.asarray(table.viscosity, float), 1e-300))]
-    if getattr(table, "variable_displacement", False):
-        cols.append(np.asarray(table.displacement, float))
-    return np.column_stack(cols)
-
-
-class Scaling:
-    """Centre and spread of the training points' axes (an axis that does not vary there is dropped)."""
-
-    def __init__(self, raw: np.ndarray):
-        med = np.nanmedian(raw, axis=0)
-        raw = np.where(np.isfinite(raw), raw, med)
-        self.fill, self.mean, self.std = med, raw.mean(axis=0), raw.std(axis=0)
-        self.keep = self.std > 1e-12 * np.maximum(np.abs(raw).max(axis=0), 1e-300)
-
-    def __call__(self, raw: np.ndarray) -> np.ndarray:
-        raw = np.where(np.isfinite(raw), raw, self.fill)
-        return ((raw - self.mean) / np.where(self.keep, self.std, 1.0))[:, self.keep]
-
-    def as_dict(self) -> dict:
-        return {"fill": self.fill.tolist(), "mean": self.mean.tolist(), "std": self.std.tolist(),
-                "keep": self.keep.tolist()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "Scaling":
-        out = cls.__new__(cls)
-        out.fill, out.mean, out.std = (np.asarray(d[k], float) for k in ("fill", "mean", "std"))
-        out.keep = np.asarray(d["keep"], bool)
-        return out
 
 
 class ResidualKriging:
@@ -105,8 +69,6 @@ class ResidualKriging:
             var[a:a + chunk] = np.maximum(self.sigma_m**2 - explained, 0.0)
         return mean, var
 
-    def as_dict(self) -> dict:
-        return {"sigma_m": self.sigma_m, "sigma_e": self.sigma_e, "length": self.length}
 
 
 def _loo_error(X, r, sigma_m, sigma_e, length, rows) -> float:

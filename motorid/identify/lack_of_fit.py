@@ -33,33 +33,47 @@ MODEL_ERROR_NEIGHBOURS = 4
 MODEL_ERROR_MIN_POINTS = 10
 
 
-def operating_coordinates(table) -> np.ndarray:
-    """The points in the operating space, each axis scaled to unit spread: signed speed, signed
-    ΔP, the mean port pressure above the case, log viscosity and (a variable unit) displacement;
-    axes that do not vary are left out."""
+def operating_axes(table) -> np.ndarray:
+    """The points' axes in the operating space, unscaled [SI]: signed speed, signed ΔP, the mean port
+    pressure above the case, log viscosity and (a variable unit) displacement."""
     cols = [np.asarray(table.speed, float), np.asarray(table.dp, float),
             0.5 * (np.asarray(table.p_a, float) + np.asarray(table.p_b, float)) - np.asarray(table.p_case, float),
             np.log(np.maximum(np.asarray(table.viscosity, float), 1e-300))]
     if getattr(table, "variable_displacement", False):
         cols.append(np.asarray(table.displacement, float))
-    out = []
-    for x in cols:
-        x = np.where(np.isfinite(x), x, np.nanmedian(x) if np.isfinite(x).any() else 0.0)
-        s = np.std(x)
-        if s > 1e-12 * max(np.max(np.abs(x)), 1e-300):
-            out.append((x - np.mean(x)) / s)
-    return np.column_stack(out) if out else np.zeros((len(table), 0))
+    return np.column_stack(cols)
 
 
-def _pairs(X: np.ndarray, k: int) -> np.ndarray:
-    """The pairs (i < j) of the ``k``-nearest-neighbour graph of the rows of X."""
-    from scipy.spatial import cKDTree
+class AxisScaling:
+    """Centre and spread of some points' axes (:func:`operating_axes`): ``scaling(axes)`` puts any points on
+    the scale of those, each axis to unit spread, a missing value at the axis's median, an axis that does
+    not vary there left out."""
 
-    k = min(k, len(X) - 1)
-    _, idx = cKDTree(X).query(X, k=k + 1)
-    i = np.repeat(np.arange(len(X)), k)
-    j = np.asarray(idx)[:, 1:].ravel()
-    pairs = np.unique(np.sort(np.column_stack([i, j]), axis=1), axis=0)
+    def __init__(self, axes: np.ndarray):
+        finite = np.isfinite(axes)
+        med = np.array([np.median(axes[finite[:, j], j]) if finite[:, j].any() else 0.0
+                        for j in range(axes.shape[1])])
+        axes = np.where(finite, axes, med)
+        self.fill, self.mean, self.std = med, axes.mean(axis=0), axes.std(axis=0)
+        self.keep = self.std > 1e-12 * np.maximum(np.abs(axes).max(axis=0, initial=0.0), 1e-300)
+
+    def __call__(self, axes: np.ndarray) -> np.ndarray:
+        axes = np.where(np.isfinite(axes), axes, self.fill)
+        return ((axes - self.mean) / np.where(self.keep, self.std, 1.0))[:, self.keep]
+
+
+def operating_coordinates(table) -> np.ndarray:
+    """The points in the operating space (:func:`operating_axes`), each axis scaled to unit spread;
+    axes that do not vary are left out."""
+    axes = operating_axes(table)
+    return AxisScaling(axes)(axes)
+
+
+def _pairs(idx: np.ndarray, k: int) -> np.ndarray:
+    """The pairs (i < j) of the ``k``-nearest-neighbour graph, from the neighbour indices ``idx`` of each
+    point (column 0: the point itself or a replicate at distance 0)."""
+    i = np.repeat(np.arange(len(idx)), k)
+    pairs = np.unique(np.sort(np.column_stack([i, idx[:, 1:k + 1].ravel()]), axis=1), axis=0)
     return pairs[pairs[:, 0] != pairs[:, 1]]
 
 
@@ -72,6 +86,8 @@ def structured_error(table, residuals: dict, seed: int = 0) -> dict:
     :data:`MODEL_ERROR_NEIGHBOURS`-nearest graph) exceeds that of shuffled residuals at the
     :data:`MODEL_ERROR_ALPHA` level; its size is the nearest pairs' mean product (the graph's where
     that is not positive), at most the residuals' mean square."""
+    from scipy.spatial import cKDTree
+
     X = operating_coordinates(table)
     rng = np.random.default_rng(seed)
     out = {}
@@ -81,7 +97,9 @@ def structured_error(table, residuals: dict, seed: int = 0) -> dict:
         if ok.size < MODEL_ERROR_MIN_POINTS or X.shape[1] == 0:
             continue
         x, y = X[ok], r[ok]
-        graph, nearest = _pairs(x, MODEL_ERROR_NEIGHBOURS), _pairs(x, 1)
+        k = min(MODEL_ERROR_NEIGHBOURS, len(x) - 1)
+        idx = np.asarray(cKDTree(x).query(x, k=k + 1)[1]).reshape(len(x), k + 1)
+        graph, nearest = _pairs(idx, k), _pairs(idx, 1)
         if len(nearest) < MODEL_ERROR_MIN_POINTS // 2:
             continue
         stat = float(np.mean(y[graph[:, 0]] * y[graph[:, 1]]))

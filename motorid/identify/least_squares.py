@@ -95,8 +95,6 @@ class _Noise:
             if opt.fixed_noise is not None:
                 new_inliers[c] = np.isfinite(obs[c]) & (np.abs(spikiness(res[c], run_of, c)) <= opt.outlier_sigma * (
                     self.breakaway if c == "breakaway" else self.runs[c][run_of]))
-                if c != "breakaway":
-                    new_inliers[c] |= shaft_locked(np.isfinite(obs[c]) & ~new_inliers[c], self.theta, self.pistons)
             elif c == "breakaway":
                 self._update_breakaway(obs[c], r, free, first)
                 new_inliers[c] = np.isfinite(obs[c]) & (np.abs(res[c]) <= opt.outlier_sigma * self.breakaway)
@@ -104,6 +102,7 @@ class _Noise:
                 self.runs[c] = floor_noise(residual_noise(r, run_of, self.n_runs, robust=first), obs[c])
                 new_inliers[c] = np.isfinite(obs[c]) & (
                     np.abs(spikiness(res[c], run_of, c)) <= opt.outlier_sigma * self.runs[c][run_of])
+            if c != "breakaway":  # rejections crowded at one shaft angle are structure, not spikes
                 new_inliers[c] |= shaft_locked(np.isfinite(obs[c]) & ~new_inliers[c], self.theta, self.pistons)
         stable = all(np.array_equal(new_inliers[c], self.inliers[c]) for c in obs)
         self.inliers = new_inliers
