@@ -180,7 +180,9 @@ def _evaluate(name, table, spec, diagnose: bool, groups=None):
     from motorid.discrepancy.tables import diagnose_table
 
     t0 = time.time()
-    rows = {"motorid": held_out(MotoridModel(spec), table, groups=groups)}
+    base = MotoridModel(spec)
+    rows = {"motorid": held_out(base, table, groups=groups),  # what `motorid predict --physics-only` gives
+            "motorid + kriged model error": held_out(WithModelError(base), table, groups=groups)}  # predict's
     found = []
     if diagnose:
         from motorid.discrepancy.table_terms import MotoridWithTerms
@@ -191,10 +193,8 @@ def _evaluate(name, table, spec, diagnose: bool, groups=None):
             model = (MotoridWithTerms(spec, dg["mechanisms"], groups=groups) if dg["unexplained"]
                      else MotoridModel(spec, dg["mechanisms"]))
             rows["motorid + diagnose"] = held_out(model, table, groups=groups)
-        # the model error the neighbours share, kriged between the training points (not yet in predict)
-        inner = model if found else MotoridModel(spec)
-        rows[("motorid + diagnose" if found else "motorid") + " + kriged model error"] = held_out(
-            WithModelError(inner), table, groups=groups)
+        if found:  # the model error the neighbours share, kriged between the training points (as predict does)
+            rows["motorid + diagnose + kriged model error"] = held_out(WithModelError(model), table, groups=groups)
     for m in all_comparators():
         rows[m.name] = held_out(m, table, groups=groups)
     return {"name": name, "rows": rows, "found": found, "seconds": time.time() - t0, "points": len(table),

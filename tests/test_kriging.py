@@ -1,5 +1,7 @@
 """The kriged model error of a table fit (motorid.identify.kriging, comparators.evaluate.WithModelError)."""
 
+import json
+
 import numpy as np
 
 from motorid.identify.kriging import fit_residual_kriging
@@ -41,15 +43,19 @@ def test_noise_alone_is_not_kriged_even_if_a_model_error_is_claimed():
 
 def test_scaling_drops_constant_axes_and_fills_gaps():
     """The axes' scaling kriging uses: a constant axis left out, a missing value at the median, each axis
-    to unit spread; the scaling of the training points applies unchanged to other points."""
-    from motorid.identify.lack_of_fit import AxisScaling
+    to unit spread, and the direction of rotation (sign of axis 0) a coordinate of its own, far apart;
+    the scaling of the training points applies unchanged to other points, also read back from JSON."""
+    from motorid.identify.lack_of_fit import DIRECTION_SEPARATION, AxisScaling
 
-    raw = np.column_stack([np.linspace(0, 10, 50), np.full(50, 3.0), np.r_[np.linspace(-1, 1, 49), np.nan]])
+    raw = np.column_stack([np.linspace(-3, 10, 50), np.full(50, 3.0), np.r_[np.linspace(-1, 1, 49), np.nan]])
     s = AxisScaling(raw)
     X = s(raw)
-    assert X.shape == (50, 2) and np.all(np.isfinite(X))
-    assert np.allclose(X.std(axis=0), 1.0) and np.allclose(X.mean(axis=0), 0.0)
+    assert X.shape == (50, 3) and np.all(np.isfinite(X))
+    assert np.allclose(X[:, :2].std(axis=0), 1.0) and np.allclose(X[:, :2].mean(axis=0), 0.0)
+    assert np.array_equal(X[:, 2], DIRECTION_SEPARATION * np.sign(raw[:, 0]))
     assert np.allclose(s(raw[:5]), X[:5])
+    back = AxisScaling.from_document(json.loads(json.dumps(s.document())))
+    assert np.allclose(back(raw), X)
 
 
 def test_the_kriged_model_error_lowers_the_held_out_error_of_a_map_the_model_misses(tmp_path):

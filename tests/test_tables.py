@@ -430,7 +430,7 @@ def test_temperature_from_the_spec_where_the_table_has_none(tmp_path):
 def test_noise_floor_and_scale_recover_both_parts_of_a_points_sigma():
     """σ_i² = σ_floor² + (s r_i)² (identify/tables.py): from residuals drawn with a known floor and
     scale, maximum likelihood gives both back; with no floor, a floor far below the scale."""
-    from motorid.identify.tables import noise_floor_and_scale
+    from motorid.identify.table_noise import noise_floor_and_scale
 
     rng = np.random.default_rng(4)
     rel = 10 ** rng.uniform(-1.5, 1.0, 4000)  # averaging counts and spreads over two decades

@@ -1,4 +1,4 @@
-"""`motorid predict RESULT_DIR POINTS --out PRED.csv [--motor SPEC.toml] [--force]`."""
+"""`motorid predict RESULT_DIR POINTS --out PRED.csv [--motor SPEC.toml] [--physics-only] [--force]`."""
 
 from __future__ import annotations
 
@@ -14,6 +14,8 @@ def register(sub):
     p.add_argument("--out", required=True, help="CSV to write")
     p.add_argument("--motor", default=None, help="motor spec TOML (default: the one stored in result.json)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--physics-only", action="store_true",
+                   help="the fitted model alone: leave out the model error the fit kriged between its table points")
     p.add_argument("--channels", default=None,
                    help="channel-map TOML for points in a foreign format (e.g. a gridded .mat map; docs/formats.md)")
     p.set_defaults(func=run)
@@ -32,8 +34,11 @@ def run(args) -> int:
     spec = load_motor_spec(args.motor) if args.motor else None
     result = load_result(args.result, spec)
     table = read_tables(args.points, result[1], require_outputs=False, channels=args.channels)
-    frame = predict_points(result, table)
+    frame = predict_points(result, table, physics_only=args.physics_only)
     write_predictions(frame, out)
+    kriged = [c[:-len("_model_error")] for c in frame.columns if c.endswith("_model_error")]
     print(f"wrote {out} ({len(frame)} points; bands: _lo95/_hi95 confidence of the model's value, "
-          f"_pi_lo95/_pi_hi95 prediction of a new reading)")
+          f"_pi_lo95/_pi_hi95 prediction of a new reading" +
+          (f"; {', '.join(kriged)} include the fit's kriged model error (the _model_error columns; "
+           "--physics-only leaves it out)" if kriged else "") + ")")
     return 0

@@ -91,6 +91,7 @@ def run_table_fit(args, logs, tables, spec) -> int:
 def format_comparison(comparison: dict) -> str:
     """A text table of the held-out errors (% of each channel's span)."""
     lines = ["held-out RMS error, % of span (K-fold | extrapolation in ΔP | in speed):"]
+    width = max([26] + [len(name) for name in comparison["models"]])
     for name, res in comparison["models"].items():
         cells = []
         for c in ("torque", "q_a", "q_b", "q_case"):
@@ -98,7 +99,7 @@ def format_comparison(comparison: dict) -> str:
                     ("kfold", "extrapolate_pressure", "extrapolate_speed")]
             if any(v is not None for v in vals):
                 cells.append(f"{c} " + "|".join("—" if v is None else f"{v:.2f}" for v in vals))
-        lines.append(f"  {name:<26} " + "  ".join(cells))
+        lines.append(f"  {name:<{width}} " + "  ".join(cells))
     return "\n".join(lines)
 
 

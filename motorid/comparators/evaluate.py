@@ -118,17 +118,23 @@ class MotoridModel:
         if label:
             self.name = label
         self._cache: dict = {}
+        self._fits: dict = {}
         self._full = None
 
     def fit(self, table):
         return self.fit_split(table, np.ones(len(table), bool))
 
     def fit_split(self, table, train):
-        """Fit on the points where ``train`` holds (the others weigh nothing)."""
+        """Fit on the points where ``train`` holds (the others weigh nothing); a split fitted before on
+        the same table is given back (the row with the kriged model error reuses the row's fits)."""
         from motorid.identify.tables import fit_table
 
+        key = (id(table), np.asarray(train, bool).tobytes())
+        if key in self._fits:
+            return self._fits[key]
         fitted = _FittedMotorid(self)
         fitted.fit = fit_table(table, self.spec, self.mechanisms, train=train, _cache=self._cache, rounds=1)
+        self._fits[key] = fitted
         return fitted
 
 
@@ -171,28 +177,15 @@ class WithModelError:
         train = np.asarray(train, bool)
         fitted = self.inner.fit_split(table, train) if hasattr(self.inner, "fit_split") else \
             self.inner.fit(table.subset(train))
+        from motorid.identify.kriging import model_error_fields
+
         sub = table.subset(train)
         pred = fitted.predict(sub)
         residuals = {c: np.asarray(sub.measured[c], float) - np.asarray(pred[c], float) for c in CHANNELS}
-        return _FittedWithModelError(fitted, *model_error_fields(sub, residuals))
-
-
-def model_error_fields(table, residuals: dict) -> tuple:
-    """(scaling, {channel: ResidualKriging}) of the residuals of a fit on ``table`` (channels where the
-    neighbours show a model error and kriging predicts left-out points better than nothing)."""
-    from motorid.identify.kriging import fit_residual_kriging
-    from motorid.identify.lack_of_fit import AxisScaling, operating_axes, structured_error
-
-    axes = operating_axes(table)
-    scaling = AxisScaling(axes)
-    X = scaling(axes)
-    fields = {}
-    for c, e in structured_error(table, residuals).items():
-        if e["sigma"] > 0:
-            krig = fit_residual_kriging(X, residuals[c], e["sigma"])
-            if krig is not None:
-                fields[c] = krig
-    return scaling, fields
+        fit = getattr(fitted, "fit", None)  # a table fit's own σ of each point, where it has one
+        sigma = {c: np.asarray(s, float)[train] for c, s in fit.table_sigma.items()
+                 if c in fit.table_reading_share} if fit is not None and hasattr(fit, "table_sigma") else None
+        return _FittedWithModelError(fitted, *model_error_fields(sub, residuals, sigma))
 
 
 class _FittedWithModelError:
@@ -225,13 +218,18 @@ def not_predicted(identifiable: dict) -> dict:
     return out
 
 
-def compare(table, spec, comparators=None, mechanisms=(), k: int = 5, motorid_model=None) -> dict:
+def compare(table, spec, comparators=None, mechanisms=(), k: int = 5, motorid_model=None,
+            model_error_row: bool = True) -> dict:
     """The ``comparison`` block: held-out errors of motorid and of every comparator on ``table``
-    (``motorid_model``: motorid's row, where not the one model plus ``mechanisms``)."""
+    (``motorid_model``: motorid's row, where not the one model plus ``mechanisms``); with
+    ``model_error_row`` also motorid's model plus its kriged model error (:class:`WithModelError`, what
+    ``motorid predict`` gives), on the same fits."""
     from motorid.comparators import all_comparators
 
     models = [motorid_model or MotoridModel(spec, mechanisms, label="motorid" + (
         " + " + "+".join(m.id for m in mechanisms) if mechanisms else ""))]
+    if model_error_row:
+        models.append(WithModelError(models[0]))
     models += list(comparators if comparators is not None else all_comparators())
     out = {"method": {"kfold": f"{k}-fold, seeded permutation (seed 0)",
                       "extrapolation": f"fit on |ΔP| (or |ω|) up to its {int(EXTRAPOLATION_QUANTILE * 100)}th "

@@ -132,9 +132,13 @@ class MotoridWithTerms(MotoridModel):
         self.groups = groups
 
     def fit_split(self, table, train):
+        key = (id(table), np.asarray(train, bool).tobytes())
+        fits = self.__dict__.setdefault("_term_fits", {})  # a split asked again (the kriged row): the same fit
+        if key in fits:
+            return fits[key]
         base = super().fit_split(table, train)
         pred = base.predict(table)
-        out = _FittedWithTerms(base)
+        out = fits[key] = _FittedWithTerms(base)
         for c in CHANNELS:
             y = np.asarray(table.measured[c], float)
             if not np.isfinite(y).any() or not np.isfinite(pred[c]).any():

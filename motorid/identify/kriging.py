@@ -55,6 +55,16 @@ class ResidualKriging:
         w = np.linalg.solve(K, kq[..., None])[..., 0]
         return w, np.sum(w * kq, axis=1)
 
+    def document(self) -> dict:
+        """The field as JSON: its training points (scaled coordinates), residuals [SI] and constants."""
+        return {"sigma": self.sigma_m, "noise": self.sigma_e, "length": self.length,
+                "points": self.X.tolist(), "residuals": self.r.tolist()}
+
+    @classmethod
+    def from_document(cls, doc: dict) -> "ResidualKriging":
+        return cls(np.asarray(doc["points"], float).reshape(len(doc["residuals"]), -1),
+                   np.asarray(doc["residuals"], float), doc["sigma"], doc["noise"], doc["length"])
+
     def predict(self, Xq: np.ndarray, chunk: int = 4096):
         """(mean, variance of the model error) at the points Xq [SI of the channel, its square]."""
         Xq = np.asarray(Xq, float)
@@ -96,7 +106,7 @@ def fit_residual_kriging(X: np.ndarray, r: np.ndarray, sigma_m: float, seed: int
     r = np.asarray(r, float)
     ok = np.isfinite(r) & np.all(np.isfinite(X), axis=1)
     X, r = np.asarray(X, float)[ok], r[ok]
-    if sigma_m <= 0 or len(r) < 10 or X.shape[1] == 0:
+    if sigma_m <= 0 or len(r) < 10 or X.shape[1] <= 1:  # the direction alone: no axis varies
         return None
     ms = float(np.mean(r**2))
     ratios = sorted({max(ms / sigma_m**2 - 1.0, 1e-3), *NUGGET_RATIOS})
@@ -111,3 +121,47 @@ def fit_residual_kriging(X: np.ndarray, r: np.ndarray, sigma_m: float, seed: int
     if choice is None:
         return None
     return ResidualKriging(X, r, sigma_m, sigma_m * np.sqrt(choice[1]), choice[0])
+
+
+def model_error_fields(table, residuals: dict, sigma: dict | None = None) -> tuple:
+    """(scaling, {channel: ResidualKriging}) of the residuals of a fit on ``table`` (channels where the
+    neighbours show a model error, :func:`~motorid.identify.lack_of_fit.structured_error` with each
+    point's noise ``sigma`` where given, and kriging predicts left-out points better than nothing)."""
+    from motorid.identify.lack_of_fit import AxisScaling, operating_axes, structured_error
+
+    axes = operating_axes(table)
+    scaling = AxisScaling(axes)
+    X = scaling(axes)
+    fields = {}
+    for c, e in structured_error(table, residuals, sigma=sigma).items():
+        if e["sigma"] > 0:
+            krig = fit_residual_kriging(X, residuals[c], e["sigma"])
+            if krig is not None:
+                fields[c] = krig
+    return scaling, fields
+
+
+#: what result.json says of the field
+FIELD_METHOD = ("simple kriging of the fit's residuals over the scaled operating space (Matérn-3/2, "
+                f"{NEIGHBOURS} nearest training points, length and noise by leave-one-out; Cressie 1993 §3.2, "
+                "Kennedy & O'Hagan 2001): the model error between measured points, added by `motorid predict` "
+                "unless --physics-only; zero far from them")
+
+
+def field_document(scaling, fields: dict) -> dict | None:
+    """result.json's ``table.model_error_field`` (None where no channel has one)."""
+    if not fields:
+        return None
+    return {"method": FIELD_METHOD, "scaling": scaling.document(),
+            "channels": {c: k.document() for c, k in fields.items()}}
+
+
+def fields_from_document(doc: dict | None) -> tuple:
+    """(scaling, {channel: ResidualKriging}) from result.json's ``table.model_error_field``; (None, {})
+    where it has none."""
+    from motorid.identify.lack_of_fit import AxisScaling
+
+    if not doc or not doc.get("channels"):
+        return None, {}
+    return (AxisScaling.from_document(doc["scaling"]),
+            {c: ResidualKriging.from_document(d) for c, d in doc["channels"].items()})

@@ -44,10 +44,16 @@ def operating_axes(table) -> np.ndarray:
     return np.column_stack(cols)
 
 
+#: points turning the other way lie this far apart (in units of an axis's spread): friction changes sign
+#: with the direction of rotation, so the model's error on one side of ω = 0 says nothing of the other's
+DIRECTION_SEPARATION = 1e3
+
+
 class AxisScaling:
     """Centre and spread of some points' axes (:func:`operating_axes`): ``scaling(axes)`` puts any points on
     the scale of those, each axis to unit spread, a missing value at the axis's median, an axis that does
-    not vary there left out."""
+    not vary there left out; and one more coordinate, the direction of rotation (sign of the speed, axis
+    0) times :data:`DIRECTION_SEPARATION`, so that no neighbour and no correlation crosses ω = 0."""
 
     def __init__(self, axes: np.ndarray):
         finite = np.isfinite(axes)
@@ -57,14 +63,27 @@ class AxisScaling:
         self.fill, self.mean, self.std = med, axes.mean(axis=0), axes.std(axis=0)
         self.keep = self.std > 1e-12 * np.maximum(np.abs(axes).max(axis=0, initial=0.0), 1e-300)
 
+    def document(self) -> dict:
+        """The scaling as JSON (result.json, for predictions at new points)."""
+        return {"fill": self.fill.tolist(), "mean": self.mean.tolist(), "std": self.std.tolist(),
+                "keep": [bool(k) for k in self.keep]}
+
+    @classmethod
+    def from_document(cls, doc: dict) -> "AxisScaling":
+        new = cls.__new__(cls)
+        new.fill, new.mean, new.std = (np.asarray(doc[k], float) for k in ("fill", "mean", "std"))
+        new.keep = np.asarray(doc["keep"], bool)
+        return new
+
     def __call__(self, axes: np.ndarray) -> np.ndarray:
         axes = np.where(np.isfinite(axes), axes, self.fill)
-        return ((axes - self.mean) / np.where(self.keep, self.std, 1.0))[:, self.keep]
+        scaled = ((axes - self.mean) / np.where(self.keep, self.std, 1.0))[:, self.keep]
+        return np.column_stack([scaled, DIRECTION_SEPARATION * np.sign(axes[:, 0])])
 
 
 def operating_coordinates(table) -> np.ndarray:
     """The points in the operating space (:func:`operating_axes`), each axis scaled to unit spread;
-    axes that do not vary are left out."""
+    axes that do not vary are left out; the direction of rotation apart (:class:`AxisScaling`)."""
     axes = operating_axes(table)
     return AxisScaling(axes)(axes)
 
@@ -77,7 +96,7 @@ def _pairs(idx: np.ndarray, k: int) -> np.ndarray:
     return pairs[pairs[:, 0] != pairs[:, 1]]
 
 
-def structured_error(table, residuals: dict, seed: int = 0) -> dict:
+def structured_error(table, residuals: dict, seed: int = 0, sigma: dict | None = None) -> dict:
     """channel → {"sigma": the model error's RMS [SI], "share": its share of the residuals' mean
     square, "pairs": neighbour pairs used, "p_value": of the permutation test}; sigma 0 where the
     neighbours show none.
@@ -85,32 +104,42 @@ def structured_error(table, residuals: dict, seed: int = 0) -> dict:
     Found where the mean product of the residuals of neighbouring points (the
     :data:`MODEL_ERROR_NEIGHBOURS`-nearest graph) exceeds that of shuffled residuals at the
     :data:`MODEL_ERROR_ALPHA` level; its size is the nearest pairs' mean product (the graph's where
-    that is not positive), at most the residuals' mean square."""
+    that is not positive), at most the residuals' mean square.  ``sigma`` (channel → each point's
+    noise σ, where it differs from point to point: table_noise.py) makes the test's products those of
+    the standardized residuals r/σ (a quiet region's structure is not drowned by a noisy one's), and
+    where the plain products give no positive size, the size is their mean weighted by
+    1/(σ_i σ_j)²."""
     from scipy.spatial import cKDTree
 
     X = operating_coordinates(table)
     rng = np.random.default_rng(seed)
+    point_sigma = dict(sigma or {})
     out = {}
     for c, r in residuals.items():
         r = np.asarray(r, float)
         ok = np.flatnonzero(np.isfinite(r))
-        if ok.size < MODEL_ERROR_MIN_POINTS or X.shape[1] == 0:
+        if ok.size < MODEL_ERROR_MIN_POINTS or X.shape[1] <= 1:  # the direction alone: no axis varies
             continue
         x, y = X[ok], r[ok]
+        s = None if point_sigma.get(c) is None else np.asarray(point_sigma[c], float)[ok]
+        u = y if s is None else y / s
         k = min(MODEL_ERROR_NEIGHBOURS, len(x) - 1)
         idx = np.asarray(cKDTree(x).query(x, k=k + 1)[1]).reshape(len(x), k + 1)
         graph, nearest = _pairs(idx, k), _pairs(idx, 1)
         if len(nearest) < MODEL_ERROR_MIN_POINTS // 2:
             continue
-        stat = float(np.mean(y[graph[:, 0]] * y[graph[:, 1]]))
+        stat = float(np.mean(u[graph[:, 0]] * u[graph[:, 1]]))
         null = np.empty(MODEL_ERROR_PERMUTATIONS)
         for b in range(MODEL_ERROR_PERMUTATIONS):
-            z = rng.permutation(y)
+            z = rng.permutation(u)
             null[b] = np.mean(z[graph[:, 0]] * z[graph[:, 1]])
         p = float((1 + np.sum(null >= stat)) / (1 + MODEL_ERROR_PERMUTATIONS))
         ms = float(np.mean(y**2))
         size = float(np.mean(y[nearest[:, 0]] * y[nearest[:, 1]]))
-        size = size if size > 0 else stat
+        size = size if size > 0 else float(np.mean(y[graph[:, 0]] * y[graph[:, 1]]))
+        if not size > 0 and s is not None:
+            w = 1.0 / (s[graph[:, 0]] * s[graph[:, 1]]) ** 2
+            size = float(np.sum(w * y[graph[:, 0]] * y[graph[:, 1]]) / np.sum(w))
         sigma = float(np.sqrt(min(size, ms))) if p < MODEL_ERROR_ALPHA and size > 0 else 0.0
         out[c] = {"sigma": sigma, "share": (sigma**2 / ms) if ms > 0 else 0.0, "pairs": int(len(graph)),
                   "p_value": p}

@@ -15,8 +15,9 @@ Bands, both 95 %, normal quantile 1.96:
   carried into the efficiencies.  It says where the true mean of the motor lies.
 - ``*_pi_lo95`` / ``*_pi_hi95`` (torque and flows): a **prediction band** of a new
   measurement, var f + max(σ², σ_m²), σ the fit's noise of that channel (a table fit:
-  the scatter of table points about the model, σ_m² of it the model error already in
-  the confidence band; a log fit: the noise of one reading).
+  the scatter of table points about the model, at the predicted value where it grows with
+  the reading, σ_m² of it the model error already in the confidence band; a log fit: the
+  noise of one reading).
 
 A channel that depends on a parameter the fit could not identify is left empty,
 with the reason in ``note``; one that does not (K_FS, K_s and the K_L(θ)
@@ -101,14 +102,17 @@ def fitted_parameters(doc: dict, spec, mechanisms):
     return params, names, cov, unidentified
 
 
-def predict_points(result, table, spec=None) -> pd.DataFrame:
+def predict_points(result, table, spec=None, physics_only: bool = False) -> pd.DataFrame:
     """Predictions at every point of ``table`` (:class:`motorid.io.tables.PointTable`) from a fit.
 
     result : a fit folder, a result.json path, or a (doc, spec, mechanisms) tuple from
     :func:`load_result`.  Returns one row per point: ``point_id`` where the table has
     it, the inputs, each output with its confidence band (``_lo95``, ``_hi95``) and,
     for torque and flows, its prediction band (``_pi_lo95``, ``_pi_hi95``), the
-    operating ``mode`` (motor / pump / none) and a ``note``.
+    operating ``mode`` (motor / pump / none) and a ``note``.  Where the fit kriged its model error
+    (result.json ``table.model_error_field``, identify/kriging.py) it is added to the channels it
+    holds (``<channel>_model_error`` columns say by how much) and its kriging variance replaces σ_m²
+    in their bands, unless ``physics_only``.
     """
     from motorid.identify.tables import angle_samples, bind_mechanisms, point_channels
 
@@ -130,7 +134,7 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
     outputs_at = jax.jit(outputs_at)
     outputs = lambda p: outputs_at(p, samples)  # noqa: E731
     base = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
-    value = np.asarray(outputs(base))
+    value = np.array(outputs(base))  # a copy: the kriged model error is added to it
     var = np.zeros_like(value)
     if names:
         std = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -173,7 +177,14 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
             whole = k not in carried or bool(moved[i][finite[i]].all())
             why.setdefault(_OUT[i][1], (k, whole))
     noise = (doc.get("table", {}).get("noise") or doc.get("noise") or {})
-    var = var + _model_error_variance(noise, value, table, disp)
+    kriged = {} if physics_only else _kriged_model_error(doc, table)
+    for i, (c, _, _) in enumerate(_OUT[:4]):
+        if c in kriged:
+            value[i] = value[i] + kriged[c][0]
+    if kriged:  # the efficiencies of the corrected channels
+        value[4:] = np.asarray(efficiencies(*value[:3], np.asarray(table.speed, float), np.asarray(table.p_a, float),
+                                            np.asarray(table.p_b, float), disp))
+    var = var + _model_error_variance(noise, value, table, disp, {c: v for c, (_, v) in kriged.items()})
     out = pd.DataFrame()
     if table.has_point_id:
         out["point_id"] = table.point_id
@@ -188,11 +199,13 @@ def predict_points(result, table, spec=None) -> pd.DataFrame:
         v = np.where(blank[i], np.nan, value[i]) / unit
         half = Z95 * np.sqrt(var[i]) / unit
         out[col], out[col + "_lo95"], out[col + "_hi95"] = v, v - half, v + half
+        if c in kriged:
+            out[col + "_model_error"] = np.where(blank[i], np.nan, kriged[c][0]) / unit
         if i < 4:
-            sigma = (noise.get(c) or {}).get("sigma")
+            sigma = _noise_at((noise.get(c) or {}), value[i])
             if sigma is not None:  # the noise about the model, less the model error the band holds already
                 model_err = float((noise.get(c) or {}).get("model_error") or 0.0)
-                half_p = Z95 * np.sqrt(var[i] + max(float(sigma) ** 2 - model_err ** 2, 0.0)) / unit
+                half_p = Z95 * np.sqrt(var[i] + np.maximum(sigma ** 2 - model_err ** 2, 0.0)) / unit
                 out[col + "_pi_lo95"], out[col + "_pi_hi95"] = v - half_p, v + half_p
     note = "; ".join(f"{col} empty: it depends on {k}, not identified by the fit" for col, (k, whole) in why.items()
                      if whole)
@@ -237,17 +250,44 @@ def _carried(doc: dict) -> dict:
     return {"KAB": "KL0"} if KAB_HELD_FOR_KL0 in reason else {}
 
 
-def _model_error_variance(noise: dict, value: np.ndarray, table, disp) -> np.ndarray:
+def _noise_at(noise: dict, value: np.ndarray) -> np.ndarray | None:
+    """The noise σ [SI] of one reading of a channel at the model's ``value`` (result.json
+    ``noise.<c>``): its ``sigma``, or where the fit found it growing with the reading
+    (identify/table_noise.py) √(floor² + (reading_share · value)²); None where the fit has none."""
+    if noise.get("sigma") is None:
+        return None
+    share = noise.get("reading_share")
+    if share:
+        return np.sqrt(float(noise.get("floor") or 0.0) ** 2 + (float(share) * np.nan_to_num(value)) ** 2)
+    return np.full(np.shape(value), float(noise["sigma"]))
+
+
+def _kriged_model_error(doc: dict, table) -> dict:
+    """channel → (kriged model error, its variance) at each point [SI, its square], from result.json's
+    ``table.model_error_field``; empty where the fit has none."""
+    from motorid.identify.kriging import fields_from_document
+    from motorid.identify.lack_of_fit import operating_axes
+
+    scaling, fields = fields_from_document((doc.get("table") or {}).get("model_error_field"))
+    if not fields:
+        return {}
+    X = scaling(operating_axes(table))
+    return {c: krig.predict(X) for c, krig in fields.items()}
+
+
+def _model_error_variance(noise: dict, value: np.ndarray, table, disp, kriged_var: dict) -> np.ndarray:
     """The variance the model's own error adds to each output (result.json ``table.noise.<c>.model_error``:
-    what neighbouring points of the fitted table share of their residuals, identify/lack_of_fit.py): to
-    the channels its square, to the efficiencies what it moves them by (central differences)."""
+    what neighbouring points of the fitted table share of their residuals, identify/lack_of_fit.py; its
+    kriging variance where it was kriged, ``kriged_var``): to the channels itself, to the efficiencies what
+    it moves them by (central differences)."""
     out = np.zeros_like(value)
-    errors = [float((noise.get(c) or {}).get("model_error") or 0.0) for c, _, _ in _OUT[:4]]
-    if not any(errors):
+    errors = [np.sqrt(kriged_var[c]) if c in kriged_var else
+              np.full(value.shape[1], float((noise.get(c) or {}).get("model_error") or 0.0)) for c, _, _ in _OUT[:4]]
+    if not any(np.any(e > 0) for e in errors):
         return out
     args = (np.asarray(table.speed, float), np.asarray(table.p_a, float), np.asarray(table.p_b, float), disp)
     for i, e in enumerate(errors):
-        if e <= 0:
+        if not np.any(e > 0):
             continue
         out[i] = e**2
         if i == 3:  # the case drain enters no efficiency (the inlet flow does)

@@ -52,7 +52,21 @@ def table_result_document(tf, spec, inputs: dict, comparison: dict | None = None
                             "estimated from its residuals" + ("; jointly with the logs, weighted by the logs' own "
                                                              "noise levels" if tf.dataset is not None else ""))
     doc["table"] = _clean(table_document(tf))
+    field = model_error_field(tf)
+    if field is not None:
+        doc["table"]["model_error_field"] = _clean(field)
     if comparison is not None:
         doc["comparison"] = _clean(comparison)
     doc["motor_spec"] = spec.to_toml()
     return doc
+
+
+def model_error_field(tf) -> dict | None:
+    """result.json's ``table.model_error_field``: the fit's residuals kriged over the operating space
+    (identify/kriging.py), for channels where neighbouring points share a model error; None where none."""
+    from motorid.identify.kriging import field_document, model_error_fields
+
+    if not any(e.get("sigma", 0) > 0 for e in tf.model_error.values()):
+        return None
+    sigma = {c: tf.table_sigma[c] for c in tf.table_reading_share}
+    return field_document(*model_error_fields(tf.table, tf.table_residuals, sigma))

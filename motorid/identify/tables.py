@@ -16,16 +16,10 @@ K_FS and K_s (no breakaway in a steady table), the K_L(θ) harmonics (no shaft
 angle), and whatever a missing output channel would have given
 (:func:`table_coverage_reasons`, then the null space of the weighted Jacobian).
 
-Noise: each output channel c has one level s_c estimated from the residuals
-(a table has no first differences to estimate it from beforehand), times a
-relative factor per point from the table's ``*_std_*`` / ``n_samples`` columns
-where it has them (:class:`motorid.io.tables.PointTable`).  Where it has them, a
-point's σ also gets a floor that averaging does not lower:
-σ_i² = σ_floor,c² + (s_c r_i)², both levels by maximum likelihood on the residuals
-(:func:`noise_floor_and_scale`): the mean of many samples is no better than the
-bench's repeatability (sensor calibration and drift, an unrecorded temperature,
-what the model leaves out), and without the floor a point of a thousand samples
-would outweigh the table.  The fit is a
+Noise: each output channel c has its σ estimated from the residuals (a table has no first
+differences to estimate it from beforehand), one level, or a floor plus a share of the table's own
+relative σ per point (``*_std_*`` / ``n_samples`` columns), or a floor plus a share of the reading
+where the likelihood says the scatter grows with it (:mod:`motorid.identify.table_noise`).  The fit is a
 bounded trust-region least squares (scipy) with the JAX Jacobian; the table
 part is linear in the base parameters, so it converges in a few steps, and the
 K-fold refits reuse one compiled residual (held-out points get weight 0).
@@ -33,7 +27,6 @@ K-fold refits reuse one compiled residual (held-out points get weight 0).
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -50,6 +43,7 @@ from motorid.identify.identifiability import (KAB_HELD_FOR_KL0, ROUGH_NOISE_DOF,
                                               single_pressure_sum_reason, tfc_carries_kf_warning)
 from motorid.identify.results import operating_ranges
 from motorid.identify.lack_of_fit import model_error_warnings, structured_error
+from motorid.identify.table_noise import ChannelNoise, channel_noise, initial_sigma
 from motorid.identify.table_model import (THETA_POINTS, angle_points, angle_samples,  # noqa: F401
                                           bind_mechanisms, point_channels, table_samples)
 from motorid.errors import InputError
@@ -137,6 +131,7 @@ class TableFit:
     notes: list = field(default_factory=list)
     table_noise_floor: dict = field(default_factory=dict)  # channel → σ_floor,c [SI] where the table weights points
     model_error: dict = field(default_factory=dict)  # channel → its structured residual (identify/lack_of_fit.py)
+    table_reading_share: dict = field(default_factory=dict)  # channel → σ's share of the reading (table_noise.py)
 
 
 def _padded(table):
@@ -323,34 +318,6 @@ def _table_files(table) -> str:
     return files[0] if len(files) == 1 else f"{files[0]} (and {len(files) - 1} more)"
 
 
-def noise_floor_and_scale(residuals, relative, dof_factor: float = 1.0, start: float | None = None):
-    """(σ_floor, s) [unit of the residuals] maximizing the Gaussian likelihood of ``residuals``
-    with σ_i² = σ_floor² + (s · relative_i)²; ``dof_factor`` (n/dof ≥ 1) inflates the squared
-    residuals for the parameters fitted.  A floor below 10⁻⁶ of s is returned as 0."""
-    from scipy.optimize import minimize
-
-    r2 = np.asarray(residuals, float) ** 2 * dof_factor
-    q2 = np.asarray(relative, float) ** 2
-    s0 = float(np.sqrt(np.mean(r2 / q2))) if start is None else float(start)
-    s0 = max(s0, 1e-300)
-
-    def nll(th):  # th = log(σ_floor / s0), log(s / s0)
-        v = np.exp(2 * th[0]) + np.exp(2 * th[1]) * q2
-        return float(np.sum(np.log(v) + r2 / (s0 * s0 * v)))
-
-    best = min((minimize(nll, x0, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 2000})
-                for x0 in ([-3.0, 0.0], [0.0, -3.0], [-1.0, -1.0])), key=lambda o: o.fun)
-    floor, scale = s0 * math.exp(best.x[0]), s0 * math.exp(best.x[1])
-    return (0.0 if floor < 1e-6 * scale else floor), scale
-
-
-def _initial_sigma(y: np.ndarray) -> float:
-    y = y[np.isfinite(y)]
-    if y.size == 0:
-        return 1.0
-    return float(max(1e-3 * (np.max(y) - np.min(y)), 1e-6 * np.max(np.abs(y)), 1e-300))
-
-
 def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: FitResult | None = None,
               harmonics: int | None = None, train=None, rounds: int = 3, fixed_noise: dict | None = None,
               _cache: dict | None = None) -> TableFit:
@@ -386,7 +353,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     has = {c: np.isfinite(table.measured[c]) & train for c in TABLE_CHANNELS}
     whole = bool(np.all(train))  # not a fold's training points (a fold too small is the comparison's to say)
     rough: set = set()
-    sigma_c = {c: _initial_sigma(table.measured[c][has[c]]) for c in TABLE_CHANNELS}
+    sigma_c = {c: initial_sigma(table.measured[c][has[c]]) for c in TABLE_CHANNELS}
     if fixed_noise:
         sigma_c.update({c: v for c, v in fixed_noise.items() if v})
     w_logs = {}
@@ -415,10 +382,11 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
             cache[key].hold(held)
         return cache[key]
 
-    floor_c = {c: 0.0 for c in TABLE_CHANNELS}  # σ_floor,c: set where the table weights its points
+    noise_c = {c: ChannelNoise(0.0, sigma_c[c]) for c in TABLE_CHANNELS}  # table_noise.py
+    pred_now = {c: np.zeros(n) for c in TABLE_CHANNELS}  # the model at every point, as of the last round
 
     def point_sigma(c):
-        return np.sqrt(floor_c[c] ** 2 + (sigma_c[c] * table.relative_sigma[c]) ** 2)
+        return noise_c[c].sigma(table.relative_sigma[c], pred_now[c])
 
     def weights():
         return {c: np.where(has[c], 1.0 / point_sigma(c), 0.0) for c in TABLE_CHANNELS}
@@ -472,13 +440,12 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
                     rough.add(f"the {c} noise rests on {own} degree{'s' * (own != 1)} of freedom ({k} points, "
                               f"{rank} parameter{'s' * (rank != 1)}): its standard errors are rough")
                 dof = max(min(dof, own), 1.0)
-            if table.weights_from.get(c, "none") != "none" and k >= 10:
-                floor, scale = noise_floor_and_scale((table.measured[c] - pred[c])[has[c]],
-                                                     table.relative_sigma[c][has[c]], k / dof, sigma_c[c])
-                floor_c[c], sigma_c[c] = floor, float(max(scale, tiny))
-                continue
-            r = (table.measured[c] - pred[c])[has[c]] / table.relative_sigma[c][has[c]]
-            sigma_c[c] = float(max(np.sqrt(np.sum(r**2) / dof), tiny))
+            weighted = table.weights_from.get(c, "none") != "none"
+            pred_now[c] = np.abs(pred[c])
+            noise_c[c] = channel_noise((table.measured[c] - pred[c])[has[c]], pred[c][has[c]],
+                                       table.relative_sigma[c][has[c]] if weighted else None, k / dof,
+                                       sigma_c[c], tiny)
+            sigma_c[c] = noise_c[c].scale
         if rescale_breakaway:
             wb = w_logs["breakaway"]
             on = wb > 0
@@ -539,7 +506,8 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     resid = {c: table.measured[c] - pred[c] for c in TABLE_CHANNELS}
     sig = {c: point_sigma(c) for c in TABLE_CHANNELS}
     # what neighbouring points share of their residuals: the model's error, not noise (lack_of_fit.py)
-    model_error = structured_error(table, {c: np.where(has[c], resid[c], np.nan) for c in TABLE_CHANNELS}) \
+    model_error = structured_error(table, {c: np.where(has[c], resid[c], np.nan) for c in TABLE_CHANNELS},
+                                   sigma={c: sig[c] for c in TABLE_CHANNELS if noise_c[c].reading_share}) \
         if whole else {}
     warnings += model_error_warnings(model_error)
     tnoise = {c: (sigma_c[c] if np.isfinite(table.measured[c]).any() else None) for c in TABLE_CHANNELS}
@@ -567,9 +535,11 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
                    noise_by_run=noise_by_run, outliers=outliers, used=used, chi2=chi2, dof=dof, steps=steps,
                    converged=converged, warnings=warnings, residuals=residuals, sigma=sigma, inliers=inliers,
                    params_all=params_all, mechanisms=tuple(mechanisms), problem=None)
-    floors = {c: v for c, v in floor_c.items() if table.weights_from.get(c, "none") != "none" and has[c].any()}
+    floors = {c: noise_c[c].floor for c in TABLE_CHANNELS
+              if has[c].any() and (table.weights_from.get(c, "none") != "none" or noise_c[c].reading_share)}
+    shares = {c: noise_c[c].reading_share for c in TABLE_CHANNELS if has[c].any() and noise_c[c].reading_share}
     return TableFit(ls, table, tnoise, pred, resid, sig, time.time() - t0, dataset, table_noise_floor=floors,
-                    model_error=model_error)
+                    model_error=model_error, table_reading_share=shares)
 
 
 def table_document(tf: TableFit) -> dict:
@@ -584,6 +554,7 @@ def table_document(tf: TableFit) -> dict:
                          "angle where nothing in the model varies with θ (probed)",
         "noise": {c: {"sigma": v, "unit": "N·m" if c == "torque" else "m³/s",
                       **({"floor": tf.table_noise_floor[c]} if c in tf.table_noise_floor else {}),
+                      **({"reading_share": tf.table_reading_share[c]} if c in tf.table_reading_share else {}),
                       **({"model_error": tf.model_error[c]["sigma"], "model_error_share": tf.model_error[c]["share"]}
                          if c in tf.model_error else {})}
                   for c, v in tf.table_noise.items()},
