@@ -204,6 +204,7 @@ class ChannelMap:
             columns["run_id"] = source.sample_groups(named)  # a group per run: the group's name
         elif "run_id" not in columns and self.is_log:
             columns["run_id"] = self._runs_by_time(_stem(file_label), columns["time_s"], rows)
+            self.runs_cut_by_time = True  # and then by set point (io/set_points.py)
         elif "run_id" not in columns and "point_id" not in columns:
             columns["run_id"] = np.full(n, _stem(file_label), dtype=object)
         for out, name in self.extra.items():

@@ -822,6 +822,11 @@ def read_foreign(path, spec=None, channels=None) -> pd.DataFrame:
         channels = find_channel_map(path)
     cmap = channels if isinstance(channels, ChannelMap) or channels is None else load_channel_map(channels)
     table = standard_table(path, cmap)
+    if getattr(cmap, "runs_cut_by_time", False) and {"speed_rpm", "p_a_bar", "p_b_bar"} <= set(table.columns):
+        from motorid.io.set_points import split_table  # many set points in one run: one run each
+        from motorid.units import PA_PER_BAR, RAD_S_PER_RPM
+
+        table = split_table(table, RAD_S_PER_RPM, PA_PER_BAR)
     with tempfile.TemporaryDirectory(prefix="motorid-") as tmp:
         twin = Path(tmp) / (path.name + ".csv")
         _write_exact_csv(table, twin)

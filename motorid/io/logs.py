@@ -471,6 +471,11 @@ def read_log(path, spec=None, channels=None) -> pd.DataFrame:
     theta = np.mod(out["theta_rad"].to_numpy(), two_pi)
     out["theta_rad"] = np.where(theta >= two_pi, 0.0, theta)
 
+    if np.isnan(temp).any():  # a temperature read slower than the rest: filled between its readings
+        from motorid.io.temperature_gaps import fill_temperature_gaps
+
+        temp = fill_temperature_gaps(t, temp, codes)[0]
+        out["oil_temp_C"] = temp
     mu = out["viscosity_Pa_s"].to_numpy()
     oil = getattr(spec, "oil", None)
     assumed = False

@@ -271,7 +271,8 @@ def _foreign_plan(path: Path, channels):
             if hasattr(source, "close"):
                 source.close()
 
-    return fields, found, blocks()
+    # a map that names no run: runs cut by the time track, then by set point (io/set_points.py)
+    return fields, found, blocks(), bool(getattr(cmap, "runs_cut_by_time", False))
 
 
 # --------------------------------------------------------------------------- one block → SI
@@ -291,6 +292,7 @@ class _FileState:
         self.proto_norm: dict = {}
         self.seen: set = set()
         self.current = None  # (run_id, protocol, [column dicts])
+        self.temp_carry = None  # (run, time, value) of the last oil temperature read (io/temperature_gaps.py)
         self.last_time = -np.inf
 
 
@@ -343,6 +345,11 @@ def _to_si(state: _FileState, block: dict) -> tuple[dict, np.ndarray, np.ndarray
     temp = out["oil_temp_C"]
     if np.any(temp < -273.15):
         raise _Invalid("temperature below absolute zero")
+    if np.isnan(temp).any():  # a temperature read slower than the rest (io/temperature_gaps.py)
+        from motorid.io.temperature_gaps import fill_temperature_gaps
+
+        temp, state.temp_carry = fill_temperature_gaps(out["time_s"], temp, run, state.temp_carry)
+        out["oil_temp_C"] = temp
     two_pi = 2.0 * np.pi
     theta = np.mod(out["theta_rad"], two_pi)
     out["theta_rad"] = np.where(theta >= two_pi, 0.0, theta)
@@ -463,14 +470,19 @@ def _file_runs(path: Path, spec, channels, advance) -> Iterator:
         yield from _whole_file_runs(path, spec, channels)
         advance(size)
         return
-    fields, found, blocks = streamed
+    fields, found, blocks, *cut = streamed
+    if cut and cut[0]:
+        from motorid.io.set_points import split_columns as pieces
+    else:
+        def pieces(rid, protocol, cols):
+            yield rid, protocol, cols
     state = _FileState(path, fields, found, spec)
     told = 0
     try:
         for block, pos in blocks:
             cols, run, proto = _to_si(state, block)
             for rid, protocol, parts in _runs_of_block(state, cols, run, proto):
-                yield rid, protocol, _join(parts)
+                yield from pieces(rid, protocol, _join(parts))
             advance(pos - told)
             told = pos
         if state.current is None:
@@ -480,7 +492,7 @@ def _file_runs(path: Path, spec, channels, advance) -> Iterator:
     except _Invalid as exc:
         raise StreamFallback(f"{path}: {exc}") from None
     rid, protocol, parts = state.current
-    yield rid, protocol, _join(parts)
+    yield from pieces(rid, protocol, _join(parts))
     advance(size - told)
 
 

@@ -22,7 +22,7 @@ from motorid.physics.base import CatalogMechanism
 from motorid.physics.compressibility import CompressibilityFlow
 from motorid.physics.friction import CasePressureFriction, StribeckFriction
 from motorid.physics.hydrodynamic import HydrodynamicTorque
-from motorid.physics.leakage import TurbulentLeakage
+from motorid.physics.leakage import GapDeformation, TurbulentLeakage
 from motorid.physics.lubrication import MixedLubricationFriction, PressureSpeedTorque
 from motorid.physics.mode import PumpModeFriction
 from motorid.physics.relief import ReliefValve
@@ -48,6 +48,7 @@ _ALL = (
     PumpModeFriction(),
     FilmHeating(),  # the viscous loss bending over at high speed (real maps, issue 20)
     ReliefValve(),  # flow past the motor above a cracking pressure (the MBARI recordings, issue 20)
+    GapDeformation(),  # leakage growing faster than the pressure (probe F's radial maps, issue 20)
     *spec_errors.MECHANISMS,  # displacement_error, leak_phase, inertia_error
     *sensors.MECHANISMS,  # flow_meter_gain_a/b/case, torque_meter_gain, flow_meter_offset_a/b/case,
     #                       sensor_lag_<channel>

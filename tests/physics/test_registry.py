@@ -42,6 +42,7 @@ VALUES = {
     "pressure_speed_loss.C_x": 4e-10, "filling_loss.C_f": 3e-10, "pump_mode_friction.dKF": -1.2e-3,
     "film_heating.c_N": 3e-5,
     "relief_valve.P_r": 1.5e7, "relief_valve.C_r": 2e-10,  # opens inside the samples' |ΔP| range
+    "gap_deformation.c": 2e-9,
 }
 REQUIRED = ["stribeck_friction", "hydrodynamic_torque", "turbulent_leakage", "compressibility_flow",
             "misalignment_ripple", "torque_offset"]
