@@ -94,17 +94,9 @@ class GapDeformation(CatalogMechanism):
     def running(self, params, spec, samples, ch):
         s = samples
         c = self.param(params, "c")
-        m = sum(1 for k in params if k.startswith("KL_a"))
-        a, b = flow.leakage_harmonics(params, m)
-        k_la = flow.leakage_coefficient(s.theta, params["KL0"], a, b, spec.pistons)
-        k_lb = flow.leakage_coefficient(s.theta - spec.phase, params["KL0"], a, b, spec.pistons)
-        q_la = flow.port_to_case_leakage(k_la, s.p_a, s.p_case, s.viscosity)
-        q_lb = flow.port_to_case_leakage(k_lb, s.p_b, s.p_case, s.viscosity)
-        q_ab = flow.cross_port_leakage(params["KAB"], s.p_a, s.p_b, s.viscosity)
-        d_la = self._change(c, q_la, s.p_a, s.p_case)
-        d_lb = self._change(c, q_lb, s.p_b, s.p_case)
-        d_ab = self._change(c, q_ab, s.p_a, s.p_b)
-        return ch._replace(q_a=ch.q_a + d_la + d_ab, q_b=ch.q_b + d_lb - d_ab, q_case=ch.q_case + d_la + d_lb)
+        q_la, q_lb, q_ab = flow.laminar_gaps(params, spec, s)
+        return flow.with_gap_changes(ch, self._change(c, q_la, s.p_a, s.p_case),
+                                     self._change(c, q_lb, s.p_b, s.p_case), self._change(c, q_ab, s.p_a, s.p_b))
 
     def describe(self, values, spec=None) -> str:
         c = self.value(values, "c")
