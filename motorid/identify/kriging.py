@@ -23,11 +23,14 @@ from __future__ import annotations
 import numpy as np
 
 #: training points each prediction is kriged from
-NEIGHBOURS = 24
+NEIGHBOURS = 16
 #: correlation lengths tried, in units of the training points' spread along each axis
 LENGTHS = (0.03, 0.06, 0.12, 0.25, 0.5, 1.0)
 #: leave-one-out points used to choose the length (a seeded subsample of larger tables)
-LOO_POINTS = 1500
+LOO_POINTS = 600
+#: training points a field keeps (a seeded subsample of denser maps: an interpolated grid of 50 000 points
+#: is carried by 20 000 of them, and result.json stays a few MB)
+FIELD_POINTS = 20000
 
 
 def _matern32(h, length):
@@ -38,11 +41,13 @@ def _matern32(h, length):
 class ResidualKriging:
     """The kriged model error of one channel: ``predict(X)`` → (mean, variance) at scaled coordinates X."""
 
-    def __init__(self, X: np.ndarray, r: np.ndarray, sigma_m: float, sigma_e: float, length: float):
+    def __init__(self, X: np.ndarray, r: np.ndarray, sigma_m: float, sigma_e: float, length: float,
+                 variance_factor: float = 1.0):
         from scipy.spatial import cKDTree
 
         self.X, self.r = np.asarray(X, float), np.asarray(r, float)
         self.sigma_m, self.sigma_e, self.length = float(sigma_m), float(sigma_e), float(length)
+        self.variance_factor = float(variance_factor)  # ≥ 1: the leave-one-out errors' own calibration
         self.tree = cKDTree(self.X)
 
     def _weights(self, Xq, idx):
@@ -58,12 +63,15 @@ class ResidualKriging:
     def document(self) -> dict:
         """The field as JSON: its training points (scaled coordinates), residuals [SI] and constants."""
         return {"sigma": self.sigma_m, "noise": self.sigma_e, "length": self.length,
-                "points": self.X.tolist(), "residuals": self.r.tolist()}
+                "variance_factor": self.variance_factor,
+                "points": np.round(self.X, 6).tolist(),  # scaled coordinates: 10⁻⁶ of a spread
+                "residuals": [float(f"{v:.7g}") for v in self.r]}
 
     @classmethod
     def from_document(cls, doc: dict) -> "ResidualKriging":
         return cls(np.asarray(doc["points"], float).reshape(len(doc["residuals"]), -1),
-                   np.asarray(doc["residuals"], float), doc["sigma"], doc["noise"], doc["length"])
+                   np.asarray(doc["residuals"], float), doc["sigma"], doc["noise"], doc["length"],
+                   doc.get("variance_factor", 1.0))
 
     def predict(self, Xq: np.ndarray, chunk: int = 4096):
         """(mean, variance of the model error) at the points Xq [SI of the channel, its square]."""
@@ -76,21 +84,27 @@ class ResidualKriging:
             idx = idx.reshape(len(q), k)
             w, explained = self._weights(q, idx)
             mean[a:a + chunk] = np.sum(w * self.r[idx], axis=1)
-            var[a:a + chunk] = np.maximum(self.sigma_m**2 - explained, 0.0)
+            var[a:a + chunk] = self.variance_factor * np.maximum(self.sigma_m**2 - explained, 0.0)
         return mean, var
 
 
 
-def _loo_error(X, r, sigma_m, sigma_e, length, rows) -> float:
-    """Mean squared leave-one-out error at ``rows`` (each kriged from its neighbours but itself)."""
+def _loo(X, r, sigma_m, sigma_e, length, rows):
+    """Leave-one-out at ``rows`` (each kriged from its neighbours but itself) → (errors, their variance
+    as the field says, σ_m² − c·w + σ_e²)."""
     krig = ResidualKriging(X, r, sigma_m, sigma_e, length)
     k = min(NEIGHBOURS + 1, len(X))
     _, idx = krig.tree.query(X[rows], k=k)
     idx = idx.reshape(len(rows), k)
     # itself out (a replicated point at distance 0 may come first or second)
     others = np.array([[j for j in row if j != i][: k - 1] for i, row in zip(rows, idx)])
-    w, _ = krig._weights(X[rows], others)
-    return float(np.mean((r[rows] - np.sum(w * r[others], axis=1)) ** 2))
+    w, explained = krig._weights(X[rows], others)
+    return r[rows] - np.sum(w * r[others], axis=1), np.maximum(sigma_m**2 - explained, 0.0) + sigma_e**2
+
+
+def _loo_error(X, r, sigma_m, sigma_e, length, rows) -> float:
+    """Mean squared leave-one-out error at ``rows``."""
+    return float(np.mean(_loo(X, r, sigma_m, sigma_e, length, rows)[0] ** 2))
 
 
 #: noise-to-field variance ratios σ_e²/σ_m² tried beside the one the neighbours give
@@ -102,25 +116,49 @@ def fit_residual_kriging(X: np.ndarray, r: np.ndarray, sigma_m: float, seed: int
     neighbours' model error ``sigma_m`` [SI]; None where there is none or too few points, or where no
     length predicts left-out points better than zero does.  The length and the noise-to-field ratio
     (that of the residuals' mean square beyond σ_m², or one of :data:`NUGGET_RATIOS`) are those of the
-    lowest leave-one-out error; the field's variance stays σ_m²."""
+    lowest leave-one-out error (a coordinate search: lengths, then ratios, then lengths again); the field's
+    variance stays σ_m², its kriging variance widened where the left-out residuals miss by more than it
+    says (their mean squared error over the mean variance claimed); a table of more than :data:`FIELD_POINTS` points is
+    kriged from a seeded subset."""
     r = np.asarray(r, float)
     ok = np.isfinite(r) & np.all(np.isfinite(X), axis=1)
     X, r = np.asarray(X, float)[ok], r[ok]
     if sigma_m <= 0 or len(r) < 10 or X.shape[1] <= 1:  # the direction alone: no axis varies
         return None
-    ms = float(np.mean(r**2))
-    ratios = sorted({max(ms / sigma_m**2 - 1.0, 1e-3), *NUGGET_RATIOS})
     rng = np.random.default_rng(seed)
+    if len(r) > FIELD_POINTS:  # a dense map: a spread subset carries its field
+        keep = np.sort(rng.choice(len(r), FIELD_POINTS, replace=False))
+        X, r = X[keep], r[keep]
+    ms = float(np.mean(r**2))
+    neighbours_ratio = max(ms / sigma_m**2 - 1.0, 1e-3)
     rows = np.arange(len(r)) if len(r) <= LOO_POINTS else np.sort(rng.choice(len(r), LOO_POINTS, replace=False))
     best, choice = float(np.mean(r[rows] ** 2)), None  # zero (the physics alone) to beat
+    tried: dict = {}
+
+    def consider(length, ratio):
+        nonlocal best, choice
+        if (length, ratio) not in tried:
+            tried[length, ratio] = _loo_error(X, r, sigma_m, sigma_m * np.sqrt(ratio), length, rows)
+            if tried[length, ratio] < best:
+                best, choice = tried[length, ratio], (length, ratio)
+
+    # coordinate search: the lengths at the neighbours' ratio, the ratios at the best length, the lengths again
     for length in LENGTHS:
-        for ratio in ratios:
-            err = _loo_error(X, r, sigma_m, sigma_m * np.sqrt(ratio), length, rows)
-            if err < best:
-                best, choice = err, (length, ratio)
+        consider(length, neighbours_ratio)
+    at = choice[0] if choice else LENGTHS[len(LENGTHS) // 2]
+    for ratio in sorted({neighbours_ratio, *NUGGET_RATIOS}):
+        consider(at, ratio)
+    if choice is not None:
+        for length in LENGTHS:
+            consider(length, choice[1])
     if choice is None:
         return None
-    return ResidualKriging(X, r, sigma_m, sigma_m * np.sqrt(choice[1]), choice[0])
+    sigma_e = sigma_m * np.sqrt(choice[1])
+    # the band the field gives must hold its own left-out residuals: where their mean squared error exceeds
+    # the mean variance it claims for them (σ_m² − c·w + σ_e²), its variance is widened by that ratio
+    err, var = _loo(X, r, sigma_m, sigma_e, choice[0], rows)
+    factor = max(1.0, float(np.mean(err**2) / max(np.mean(var), 1e-300)))
+    return ResidualKriging(X, r, sigma_m, sigma_e, choice[0], factor)
 
 
 def model_error_fields(table, residuals: dict, sigma: dict | None = None) -> tuple:
