@@ -181,3 +181,17 @@ def test_the_kriged_model_error_is_a_row_of_the_fits_comparison_and_adds_nothing
     result = load_result(d / "fit")
     pred = predict_points(result, read_table(d / "far.csv", result[1], require_outputs=False))
     assert abs(pred["torque_Nm_model_error"].iloc[0]) < 1e-6 * doc["table"]["noise"]["torque"]["model_error"]
+
+
+def test_the_kriged_field_takes_points_with_an_axis_more_or_less_than_its_fit_had():
+    """A field fitted on fixed-displacement points reads points that carry a displacement (the axis it
+    did not have is dropped), and one fitted on a variable unit reads points without one (at the fit's
+    median): no broadcasting error, the same coordinates on the axes both have."""
+    from motorid.identify.lack_of_fit import AxisScaling
+
+    rng = np.random.default_rng(0)
+    four, five = rng.normal(size=(30, 4)), rng.normal(size=(30, 5))
+    s4, s5 = AxisScaling(four), AxisScaling(five)
+    assert np.allclose(s4(np.column_stack([four, rng.normal(size=30)])), s4(four))
+    short = s5(five[:, :4])
+    assert short.shape == s5(five).shape and np.all(np.isfinite(short))

@@ -79,6 +79,11 @@ class AxisScaling:
         return new
 
     def __call__(self, axes: np.ndarray) -> np.ndarray:
+        axes = np.asarray(axes, float)
+        d = self.fill.size  # points with an axis the scaled ones lack (a displacement), or without one they had
+        if axes.shape[1] != d:
+            axes = (axes[:, :d] if axes.shape[1] > d else
+                    np.column_stack([axes, np.full((axes.shape[0], d - axes.shape[1]), np.nan)]))
         axes = np.where(np.isfinite(axes), axes, self.fill)
         scaled = ((axes - self.mean) / np.where(self.keep, self.std, 1.0))[:, self.keep]
         return np.column_stack([scaled, DIRECTION_SEPARATION * np.sign(axes[:, 0])])

@@ -14,10 +14,10 @@ Bands, both 95 %, normal quantile 1.96:
   a real map by structure, :mod:`motorid.identify.lack_of_fit`; 0 where it does not),
   carried into the efficiencies.  It says where the true mean of the motor lies.
 - ``*_pi_lo95`` / ``*_pi_hi95`` (torque and flows): a **prediction band** of a new
-  measurement, var f + max(σ², σ_m²), σ the fit's noise of that channel (a table fit:
+  measurement, var f + σ²(1 − s_m), σ the fit's noise of that channel (a table fit:
   the scatter of table points about the model, at the predicted value where it grows with
-  the reading, σ_m² of it the model error already in the confidence band; a log fit: the
-  noise of one reading).
+  the reading, s_m the model error's share of that scatter, already in the confidence band;
+  a log fit: the noise of one reading).
 
 A channel that depends on a parameter the fit could not identify is left empty,
 with the reason in ``note``; one that does not (K_FS, K_s and the K_L(θ)
@@ -204,8 +204,9 @@ def predict_points(result, table, spec=None, physics_only: bool = False) -> pd.D
         if i < 4:
             sigma = _noise_at((noise.get(c) or {}), value[i])
             if sigma is not None:  # the noise about the model, less the model error the band holds already
-                model_err = float((noise.get(c) or {}).get("model_error") or 0.0)
-                half_p = Z95 * np.sqrt(var[i] + np.maximum(sigma ** 2 - model_err ** 2, 0.0)) / unit
+                # (its share of the scatter, point by point where the noise grows with the reading)
+                share = min(max(float((noise.get(c) or {}).get("model_error_share") or 0.0), 0.0), 1.0)
+                half_p = Z95 * np.sqrt(var[i] + sigma ** 2 * (1.0 - share)) / unit
                 out[col + "_pi_lo95"], out[col + "_pi_hi95"] = v - half_p, v + half_p
     note = "; ".join(f"{col} empty: it depends on {k}, not identified by the fit" for col, (k, whole) in why.items()
                      if whole)

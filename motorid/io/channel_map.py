@@ -158,6 +158,7 @@ class ChannelMap:
         columns: dict = {}
         n = None
         first = None
+        self.runs_cut_by_time = False  # set below where this file's runs are cut by its time track
         grid = self._grid(source, file_label) if self.grid_axes else None
         read = (lambda name: source.get(name)) if rows is None else (lambda name: source.get(name, *rows))  # noqa: E731
         order = sorted(self.channels.items(), key=lambda kv: kv[0] != "time_s")  # the time track first

@@ -824,8 +824,13 @@ def read_foreign(path, spec=None, channels=None) -> pd.DataFrame:
     table = standard_table(path, cmap)
     if getattr(cmap, "runs_cut_by_time", False) and {"speed_rpm", "p_a_bar", "p_b_bar"} <= set(table.columns):
         from motorid.io.set_points import split_table  # many set points in one run: one run each
+        from motorid.io.temperature_gaps import fill_temperature_gaps
         from motorid.units import PA_PER_BAR, RAD_S_PER_RPM
 
+        if "oil_temp_C" in table.columns and table["oil_temp_C"].isna().any():  # before the ramps go
+            table = table.assign(oil_temp_C=fill_temperature_gaps(
+                table["time_s"].to_numpy(float), table["oil_temp_C"].to_numpy(float),
+                pd.factorize(table["run_id"])[0])[0])
         table = split_table(table, RAD_S_PER_RPM, PA_PER_BAR)
     with tempfile.TemporaryDirectory(prefix="motorid-") as tmp:
         twin = Path(tmp) / (path.name + ".csv")

@@ -345,7 +345,7 @@ def _to_si(state: _FileState, block: dict) -> tuple[dict, np.ndarray, np.ndarray
     temp = out["oil_temp_C"]
     if np.any(temp < -273.15):
         raise _Invalid("temperature below absolute zero")
-    if np.isnan(temp).any():  # a temperature read slower than the rest (io/temperature_gaps.py)
+    if np.isnan(temp).any() or state.temp_carry is not None:  # read slower than the rest (io/temperature_gaps.py)
         from motorid.io.temperature_gaps import fill_temperature_gaps
 
         temp, state.temp_carry = fill_temperature_gaps(out["time_s"], temp, run, state.temp_carry)

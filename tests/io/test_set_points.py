@@ -175,3 +175,25 @@ def test_a_continuous_recording_fits_as_its_runs_do(continuous_campaign):
         c = cont["parameters"][k]
         assert c["identifiable"], k
         assert abs(c["value"] - e["value"]) < e["std"], (k, c["value"], e["value"], e["std"])
+
+
+def test_short_plateaus_get_the_temperature_read_between_them(tmp_path):
+    """Plateaus of 0.8 s with the temperature read every 2 s: the temperature is filled before the ramps
+    are cut away, so every plateau's samples keep a viscosity (a plateau between two readings had none)."""
+    from motorid.io.logs import read_log
+    from motorid.io.spec import load_motor_spec
+
+    t, w, dp, _ = _steps([(500, 50), (1000, 150), (1500, 250), (2000, 100)], hold=0.8)
+    temp = np.where(np.isclose(np.mod(t, 2.0), 0.0, atol=5e-4), 45 + t, np.nan)
+    pd.DataFrame({"t": t, "ang": np.degrees(np.cumsum(w) * 1e-3) % 360, "n": w / RPM, "M": 50.0, "pa": dp / 1e5 + 7,
+                  "pb": 7.0, "pc": 0.5, "qa": 10.0, "qb": -9.8, "qc": 0.2, "T": temp}).to_csv(tmp_path / "log.csv",
+                                                                                              index=False)
+    cols = {"time_s": ("t", "s"), "shaft_angle_deg": ("ang", "deg"), "speed_rpm": ("n", "rpm"),
+            "torque_Nm": ("M", "N*m"), "p_a_bar": ("pa", "bar"), "p_b_bar": ("pb", "bar"), "p_case_bar": ("pc", "bar"),
+            "q_a_lpm": ("qa", "l/min"), "q_b_lpm": ("qb", "l/min"), "q_case_lpm": ("qc", "l/min"),
+            "oil_temp_C": ("T", "degC")}
+    (tmp_path / "log.channels.toml").write_text('[constants]\nprotocol = "constant_speed"\n[channels]\n' + "".join(
+        f'{k} = {{name = "{n}", unit = "{u}"}}\n' for k, (n, u) in cols.items()))
+    frame = read_log(tmp_path / "log.csv", load_motor_spec(DEMO / "motor.toml"))
+    assert frame["run_id"].nunique() == 4
+    assert frame["viscosity_Pa_s"].notna().all() and frame["oil_temp_C"].notna().all()
