@@ -63,20 +63,16 @@ def leakage_harmonics(params: dict, harmonics: int):
     return a, b
 
 
-def laminar_gaps(params: dict, spec, samples):
-    """The 1992 model's laminar leaks at ``samples`` → (Q_LA, Q_LB, Q_AB) [m³/s]: port A and port B to
-    the case (K_LA(θ), K_LB(θ) = K_LA(θ − φ), Eq. 38-41) and A to B (K_AB), for mechanisms that change
-    the law of a gap."""
+def with_changed_gaps(ch, params: dict, spec, samples, change):
+    """The channels ``ch`` with each laminar gap of the 1992 model changed by ``change(q, p_up, p_down)``
+    [m³/s] (the gap's laminar flow q and its end pressures → what the changed law adds to it): port A and
+    port B to the case (K_LA(θ), K_LB(θ) = K_LA(θ − φ), Eq. 38-41) and A to B (K_AB).  Into port A and B
+    what leaves them, out of the case drain what reaches it: the mass balance holds."""
     s = samples
     a, b = leakage_harmonics(params, sum(1 for k in params if k.startswith("KL_a")))
     k_la = leakage_coefficient(s.theta, params["KL0"], a, b, spec.pistons)
     k_lb = leakage_coefficient(s.theta - spec.phase, params["KL0"], a, b, spec.pistons)
-    return (port_to_case_leakage(k_la, s.p_a, s.p_case, s.viscosity),
-            port_to_case_leakage(k_lb, s.p_b, s.p_case, s.viscosity),
-            cross_port_leakage(params["KAB"], s.p_a, s.p_b, s.viscosity))
-
-
-def with_gap_changes(ch, d_la, d_lb, d_ab):
-    """The channels ``ch`` with the gaps' flows changed by (ΔQ_LA, ΔQ_LB, ΔQ_AB) [m³/s]: into port A and B
-    what leaves them, out of the case drain what reaches it (the mass balance holds)."""
+    d_la = change(port_to_case_leakage(k_la, s.p_a, s.p_case, s.viscosity), s.p_a, s.p_case)
+    d_lb = change(port_to_case_leakage(k_lb, s.p_b, s.p_case, s.viscosity), s.p_b, s.p_case)
+    d_ab = change(cross_port_leakage(params["KAB"], s.p_a, s.p_b, s.viscosity), s.p_a, s.p_b)
     return ch._replace(q_a=ch.q_a + d_la + d_ab, q_b=ch.q_b + d_lb - d_ab, q_case=ch.q_case + d_la + d_lb)

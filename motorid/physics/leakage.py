@@ -92,11 +92,8 @@ class GapDeformation(CatalogMechanism):
         return q * (opening * opening * opening - 1.0)
 
     def running(self, params, spec, samples, ch):
-        s = samples
         c = self.param(params, "c")
-        q_la, q_lb, q_ab = flow.laminar_gaps(params, spec, s)
-        return flow.with_gap_changes(ch, self._change(c, q_la, s.p_a, s.p_case),
-                                     self._change(c, q_lb, s.p_b, s.p_case), self._change(c, q_ab, s.p_a, s.p_b))
+        return flow.with_changed_gaps(ch, params, spec, samples, lambda q, up, down: self._change(c, q, up, down))
 
     def describe(self, values, spec=None) -> str:
         c = self.value(values, "c")

@@ -59,11 +59,8 @@ class PressureViscosity(CatalogMechanism):
         return q * (factor - 1.0)
 
     def running(self, params, spec, samples, ch):
-        s = samples
         alpha = self.param(params, "alpha")
-        q_la, q_lb, q_ab = flow.laminar_gaps(params, spec, s)
-        return flow.with_gap_changes(ch, self._change(alpha, q_la, s.p_a, s.p_case),
-                                     self._change(alpha, q_lb, s.p_b, s.p_case), self._change(alpha, q_ab, s.p_a, s.p_b))
+        return flow.with_changed_gaps(ch, params, spec, samples, lambda q, up, down: self._change(alpha, q, up, down))
 
     def describe(self, values, spec=None) -> str:
         alpha = self.value(values, "alpha")
