@@ -127,14 +127,16 @@ class MotoridModel:
     def fit_split(self, table, train):
         """Fit on the points where ``train`` holds (the others weigh nothing); a split fitted before on
         the same table is given back (the row with the kriged model error reuses the row's fits)."""
+        key = (id(table), np.asarray(train, bool).tobytes())
+        if key not in self._fits:
+            self._fits[key] = self._fit_split(table, train)
+        return self._fits[key]
+
+    def _fit_split(self, table, train):
         from motorid.identify.tables import fit_table
 
-        key = (id(table), np.asarray(train, bool).tobytes())
-        if key in self._fits:
-            return self._fits[key]
         fitted = _FittedMotorid(self)
         fitted.fit = fit_table(table, self.spec, self.mechanisms, train=train, _cache=self._cache, rounds=1)
-        self._fits[key] = fitted
         return fitted
 
 

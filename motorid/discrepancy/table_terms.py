@@ -131,14 +131,10 @@ class MotoridWithTerms(MotoridModel):
         super().__init__(spec, mechanisms, label)
         self.groups = groups
 
-    def fit_split(self, table, train):
-        key = (id(table), np.asarray(train, bool).tobytes())
-        fits = self.__dict__.setdefault("_term_fits", {})  # a split asked again (the kriged row): the same fit
-        if key in fits:
-            return fits[key]
-        base = super().fit_split(table, train)
+    def _fit_split(self, table, train):  # MotoridModel.fit_split gives a split asked again back
+        base = super()._fit_split(table, train)
         pred = base.predict(table)
-        out = fits[key] = _FittedWithTerms(base)
+        out = _FittedWithTerms(base)
         for c in CHANNELS:
             y = np.asarray(table.measured[c], float)
             if not np.isfinite(y).any() or not np.isfinite(pred[c]).any():

@@ -161,17 +161,18 @@ def fit_residual_kriging(X: np.ndarray, r: np.ndarray, sigma_m: float, seed: int
     return ResidualKriging(X, r, sigma_m, sigma_e, choice[0], factor)
 
 
-def model_error_fields(table, residuals: dict, sigma: dict | None = None) -> tuple:
+def model_error_fields(table, residuals: dict, sigma: dict | None = None, errors: dict | None = None) -> tuple:
     """(scaling, {channel: ResidualKriging}) of the residuals of a fit on ``table`` (channels where the
     neighbours show a model error, :func:`~motorid.identify.lack_of_fit.structured_error` with each
-    point's noise ``sigma`` where given, and kriging predicts left-out points better than nothing)."""
+    point's noise ``sigma`` where given, or ``errors`` where the fit has it already, and kriging predicts
+    left-out points better than nothing)."""
     from motorid.identify.lack_of_fit import AxisScaling, operating_axes, structured_error
 
     axes = operating_axes(table)
     scaling = AxisScaling(axes)
     X = scaling(axes)
     fields = {}
-    for c, e in structured_error(table, residuals, sigma=sigma).items():
+    for c, e in (structured_error(table, residuals, sigma=sigma) if errors is None else errors).items():
         if e["sigma"] > 0:
             krig = fit_residual_kriging(X, residuals[c], e["sigma"])
             if krig is not None:

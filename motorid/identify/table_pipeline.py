@@ -68,5 +68,4 @@ def model_error_field(tf) -> dict | None:
 
     if not any(e.get("sigma", 0) > 0 for e in tf.model_error.values()):
         return None
-    sigma = {c: tf.table_sigma[c] for c in tf.table_reading_share}
-    return field_document(*model_error_fields(tf.table, tf.table_residuals, sigma))
+    return field_document(*model_error_fields(tf.table, tf.table_residuals, errors=tf.model_error))
