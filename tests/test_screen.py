@@ -159,19 +159,33 @@ def test_linear_update_ranks_like_the_fits(campaign):
     assert pred["turbulent_leakage"] < 1.0 < pred["torque_meter_gain"]
 
 
-def test_harmonic_fits_are_one_least_squares_solve_per_order():
-    """locate's all-orders-at-once harmonic fits against a least-squares solve per order, on
-    samples that cover the shaft unevenly (so the orders are not orthogonal)."""
-    from motorid.discrepancy.locate import _harmonic_fits
+def test_harmonic_fits_are_one_least_squares_solve_per_run_and_order():
+    """locate's harmonic fits of every run and order at once against a least-squares solve per run and
+    order, on runs that cover the shaft unevenly (so the orders are not orthogonal), with a masked-out
+    sample, an empty run and a run fitted to fewer orders."""
+    from motorid.discrepancy.locate import _harmonic_fits_by_run
+    from motorid.discrepancy.run_segments import RunIndex
 
     rng = np.random.default_rng(5)
-    theta = np.sort(rng.uniform(0.0, 2.3 * np.pi, 300)) ** 1.1
-    z = 0.7 * np.cos(3 * theta - 0.4) + rng.normal(size=300) + 2.0
-    for k, beta, explained in _harmonic_fits(theta, z, 9):
-        X = np.column_stack([np.cos(k * theta), np.sin(k * theta)])
-        X = X - X.mean(axis=0)
-        ref = np.linalg.lstsq(X, z - z.mean(), rcond=None)[0]
-        assert np.allclose(beta, ref, rtol=1e-9, atol=1e-12)
-        assert explained == pytest.approx(float(np.sum((X @ ref) ** 2)), rel=1e-9)
-        if k == 3:
-            assert np.hypot(*beta) == pytest.approx(0.7, abs=0.2)
+    sizes = [300, 0, 180, 250]
+    run_of = np.concatenate([np.full(n, r) for r, n in enumerate(sizes)])
+    theta = np.concatenate([np.sort(rng.uniform(0.0, 2.3 * np.pi, n)) ** 1.1 for n in sizes])
+    z = 0.7 * np.cos(3 * theta - 0.4) + rng.normal(size=theta.size) + 2.0
+    ok = np.ones(theta.size, bool)
+    ok[5] = False
+    kept = RunIndex(run_of, len(sizes)).kept(ok)
+    orders = np.array([9, 0, 4, 0])  # run 3 has samples but is not fitted
+    fits = _harmonic_fits_by_run(theta, kept.take(theta), kept.take(z), kept, orders)
+    assert [k for k, *_ in fits] == list(range(1, 10))
+    for k, runs, betas, explained in fits:
+        assert list(runs) == [r for r in (0, 2) if orders[r] >= k]
+        for r, beta, expl in zip(runs, betas, explained):
+            sel = (run_of == r) & ok
+            X = np.column_stack([np.cos(k * theta[sel]), np.sin(k * theta[sel])])
+            X = X - X.mean(axis=0)
+            y = z[sel] - z[sel].mean()
+            ref = np.linalg.lstsq(X, y, rcond=None)[0]
+            assert np.allclose(beta, ref, rtol=1e-9, atol=1e-12)
+            assert expl == pytest.approx(float(np.sum((X @ ref) ** 2)), rel=1e-9)
+            if k == 3:
+                assert np.hypot(*beta) == pytest.approx(0.7, abs=0.25)

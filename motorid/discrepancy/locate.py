@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import chdtrc  # the χ² survival function, without scipy.stats' second of import
 
+from motorid.discrepancy.run_segments import RunIndex, Segments
 from motorid.units import CHANNEL_WORDS, LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S, RUNNING_CHANNELS
 
 UNIT = {"torque": ("N·m", 1.0), "breakaway": ("N·m", 1.0), "q_a": ("L/min", LPM_PER_M3S),
@@ -103,38 +104,29 @@ def _lag1(z: np.ndarray) -> float:
     return float(np.clip(np.sum(a * b) / den, 0.0, 0.95)) if den > 0 else 0.0
 
 
-class _RunIndex:
-    """Each run's samples, in time order: ``of(r)`` → their indices (a stable sort of the run
-    numbers, made once; a run's samples are then a slice, not a mask over every sample)."""
-
-    def __init__(self, run_of, n_runs: int):
-        self.order = np.argsort(run_of, kind="stable")
-        self.bounds = np.searchsorted(np.asarray(run_of)[self.order], np.arange(n_runs + 1))
-
-    def of(self, r: int) -> np.ndarray:
-        return self.order[self.bounds[r]:self.bounds[r + 1]]
-
-
 def _run_table(z, index, n_runs, shared_var=None):
     """Per run: mean normalized residual and its standard error (AR(1) corrected;
     plus ``shared_var`` per run, an error common to the run's samples in units of
     its noise level squared, such as that of its smoothed viscosity).  ``index``: a
-    :class:`_RunIndex`, or the run of each sample."""
-    if not isinstance(index, _RunIndex):
-        index = _RunIndex(np.asarray(index, dtype=int), n_runs)
-    mean = np.full(n_runs, np.nan)
-    se = np.full(n_runs, np.nan)
-    for r in range(n_runs):
-        v = z[index.of(r)]
-        v = v[np.isfinite(v)]
-        if v.size < 5:
-            continue
-        rho = _lag1(v)
-        n_eff = v.size * (1 - rho) / (1 + rho)
-        mean[r] = v.mean()
-        se[r] = max(np.std(v), 1.0) / np.sqrt(max(n_eff, 1.0))
-        if shared_var is not None and np.isfinite(shared_var[r]):
-            se[r] = np.sqrt(se[r] ** 2 + shared_var[r])
+    :class:`~motorid.discrepancy.run_segments.RunIndex`, or the run of each sample."""
+    if not isinstance(index, RunIndex):
+        index = RunIndex(np.asarray(index, dtype=int), n_runs)
+    z = np.asarray(z, dtype=float)
+    seg = index.kept(np.isfinite(z))
+    v = seg.take(z)
+    mean = seg.mean(v)
+    rho = seg.lag1(v)
+    n_eff = seg.n * (1 - rho) / (1 + rho)
+    d = v - mean[seg.run]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        std = np.sqrt(seg.sum(d * d) / seg.n)
+    se = np.maximum(std, 1.0) / np.sqrt(np.maximum(n_eff, 1.0))
+    if shared_var is not None:
+        shared = np.asarray(shared_var, dtype=float)
+        se = np.where(np.isfinite(shared), np.sqrt(se**2 + np.where(np.isfinite(shared), shared, 0.0)), se)
+    few = seg.n < 5
+    mean[few] = np.nan
+    se[few] = np.nan
     return mean, se
 
 
@@ -219,7 +211,8 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
     runs = dataset.runs
     kmax = max_order or 2 * spec.pistons + 2
     found: list[Structure] = []
-    index = _RunIndex(run_of, n_runs)
+    index = RunIndex(run_of, n_runs)
+    every = index.kept()
 
     per_run = {
         "speed": _quantile_groups(runs["speed_median_rad_s"].abs().to_numpy(), 6, fmt=_rpm),
@@ -234,11 +227,7 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
     # run-level medians of quantities not in the runs table
     for name, arr, fmt in (("pressure to case", np.asarray(s.p_case), _bar),
                            ("viscosity", np.asarray(s.viscosity), _mpas)):
-        med = np.full(n_runs, np.nan)
-        for r in range(n_runs):
-            if index.bounds[r + 1] > index.bounds[r]:
-                med[r] = np.median(arr[index.of(r)])
-        per_run[name] = _quantile_groups(med, 4, fmt=fmt)
+        per_run[name] = _quantile_groups(every.median(every.take(arr)), 4, fmt=fmt)
 
     for c in RUNNING_CHANNELS:
         if c not in ls.residuals:
@@ -247,14 +236,9 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
         if ok.sum() < 20:
             continue
         z = np.where(ok, res / sig, np.nan)
-        mean_res = np.full(n_runs, np.nan)
-        noise_run = np.full(n_runs, np.nan)
-        for r in range(n_runs):
-            sel = index.of(r)
-            sel = sel[ok[sel]]
-            if sel.size:
-                mean_res[r] = res[sel].mean()
-                noise_run[r] = np.median(sig[sel])
+        kept = index.kept(ok)
+        mean_res = kept.mean(kept.take(res))
+        noise_run = kept.median(kept.take(sig))
         # the smoothed viscosity's error is common to a run: it moves the run's mean residual
         visc = getattr(ls, "viscosity_run_variance", {}).get(c)
         shared = None
@@ -282,7 +266,7 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
                     effect=worst[1], effect_sigma=abs(worst[1]) / worst[3] if worst[3] > 0 else np.inf,
                     where=_words_between(c, var, worst, runs, have, labels), groups=glist))
         # within runs: shaft orders and time
-        found += _within_runs(c, z, res, sig, ok, s, index, n_runs, kmax, spec, per_run["speed"])
+        found += _within_runs(c, z, sig, ok, s, kept, kmax, spec, per_run["speed"], noise_run)
 
     if "breakaway" in ls.residuals and np.sum(ls.inliers["breakaway"]) >= 6:
         found += _breakaway_structures(ls, dataset, spec)
@@ -327,69 +311,164 @@ def _ripple_size(amps, zamps, runs_seen, speed_groups):
     return best
 
 
-def _harmonic_fits(theta, z, kmax: int):
-    """Each shaft order k = 1…kmax fitted alone to z with an intercept (a run's offset is not
-    angle structure): z − z̄ ≈ a (cos kθ − mean) + b (sin kθ − mean) → [(k, (a, b), Σ fit²)].
-    All orders at once from the 2×2 normal equations of each (the same numbers as one
-    least-squares solve per order)."""
-    e = np.cumprod(np.broadcast_to(np.exp(1j * theta)[:, None], (theta.size, kmax)), axis=1)  # e^{ikθ}: n × K
-    c, s = e.real - e.real.mean(axis=0), e.imag - e.imag.mean(axis=0)
-    y = z - z.mean()
-    cc, ss, cs = np.sum(c * c, axis=0), np.sum(s * s, axis=0), np.sum(c * s, axis=0)
-    bc, bs = y @ c, y @ s
-    det = cc * ss - cs**2
-    good = det > 1e-12 * np.maximum(cc * ss, 1e-300)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        beta = np.stack([ss * bc - cs * bs, cc * bs - cs * bc], axis=1) / det[:, None]
-    for k in np.flatnonzero(~good):  # the angles do not tell cos from sin at this order
-        beta[k] = np.linalg.lstsq(np.column_stack([c[:, k], s[:, k]]), y, rcond=None)[0]
-    explained = beta[:, 0] * bc + beta[:, 1] * bs
-    return [(k + 1, beta[k], float(explained[k])) for k in range(kmax)]
+#: what depends on a channel's mask alone (:func:`_sampling`, :func:`_angle_sums`), for the masks seen
+#: last: diagnose judges several fits whose inliers are the base fit's
+_ANGLE_SUMS: dict = {}
+_ANGLE_SUMS_KEPT = 16
 
 
-def _within_runs(c, z, res, sig, ok, s, index: _RunIndex, n_runs, kmax, spec, speed_groups=None) -> list:
-    theta = np.asarray(s.theta)
-    t = np.asarray(s.time)
-    speed = np.asarray(s.speed)
+def _mask_key(theta_all, kept: Segments, *extra) -> tuple:
+    import hashlib
+
+    digest = hashlib.blake2b(b"".join([kept.idx.tobytes(), *(np.asarray(x).tobytes() for x in extra)]),
+                             digest_size=16).digest()
+    return id(theta_all), theta_all.size, digest
+
+
+def _kept_for(key, theta_all, compute):
+    """``compute()`` for a channel mask, kept for the masks seen last (:data:`_ANGLE_SUMS`)."""
+    hit = _ANGLE_SUMS.get(key)
+    if hit is not None and hit[0] is theta_all:
+        return hit[1]
+    value = compute()
+    if len(_ANGLE_SUMS) >= _ANGLE_SUMS_KEPT:
+        _ANGLE_SUMS.pop(next(iter(_ANGLE_SUMS)))
+    _ANGLE_SUMS[key] = (theta_all, value)  # the array held: its id is not reused while kept
+    return value
+
+
+def _sampling(theta_all, kept: Segments, t, theta, speed) -> tuple:
+    """Per run: the shaft angle a sample step covers (|median speed| × median time step) [rad]
+    and the range of the unwrapped angle where steps are under a quarter turn [rad]."""
+
+    def compute():
+        dt = np.where(kept.n > 1, kept.pair_median(t), np.inf)
+        step = np.abs(kept.median(kept.take(speed))) * dt
+        with np.errstate(invalid="ignore"):
+            span = np.where(step < np.pi / 2, kept.unwrapped_ptp(theta), 0.0)
+        return step, span
+
+    return _kept_for(_mask_key(theta_all, kept, b"sampling"), theta_all, compute)
+
+
+def _angle_sums(theta_all, kept: Segments, theta, runs, start, n, row, kmax: int) -> list:
+    """Per order k = 1 … ``kmax`` and fitted run: (mean cos kθ, mean sin kθ, Σc², Σs², Σcs) of the
+    run-centred c = cos kθ − mean, s = sin kθ − mean → [(mc, ms, cc, ss, cs)].  They depend on
+    the shaft angles and the mask alone, so they are kept for the masks seen last."""
+
+    def compute():
+        out = []
+        e1 = np.exp(1j * theta)
+        e = e1
+        for k in range(1, kmax + 1):
+            if k > 1:
+                e = e * e1
+            C, S = e.real, e.imag
+            tot = np.add.reduceat(np.stack([C, S, C * C, S * S, C * S]), start, axis=1)
+            mc, ms = tot[0] / n, tot[1] / n
+            out.append((mc, ms, tot[2] - n * mc * mc, tot[3] - n * ms * ms, tot[4] - n * mc * ms))
+        return out
+
+    return _kept_for(_mask_key(theta_all, kept, runs, np.int64(kmax)), theta_all, compute)
+
+
+def _harmonic_fits_by_run(theta_all, theta, z, kept: Segments, orders):
+    """Each shaft order k = 1 … ``orders[r]`` (0: none) fitted alone, with an intercept (a run's offset is
+    not angle structure), to run r's kept samples, in every run at once:
+    z − z̄ ≈ a (cos kθ − mean) + b (sin kθ − mean), from the 2×2 normal equations of each order (the
+    numbers of one least-squares solve per run and order); ``theta``, ``z`` are the kept samples (``theta``, ``z`` in segment order; ``theta_all`` the per-sample array they
+    were taken from) → [(k, runs, (a, b) per run, Σ fit² per run)] for each order fitted in some run."""
+    orders = np.asarray(orders, dtype=int)
+    kmax = int(orders.max(initial=0))
+    if kmax == 0:
+        return []
+    runs = orders > 0
+    sub = runs[kept.run]  # the samples of the runs fitted
+    th, zz, run = theta[sub], z[sub], kept.run[sub]
+    n = kept.n[runs].astype(float)
+    start = np.concatenate([[0], np.cumsum(kept.n[runs])[:-1]])
+    seg_runs = np.flatnonzero(runs)
+    local = np.full(kept.n_runs, -1)
+    local[seg_runs] = np.arange(seg_runs.size)
+    row = local[run]
+    angle = _angle_sums(theta_all, kept, th, runs, start, n, row, kmax)
+    y = zz - (np.add.reduceat(zz, start) / n)[row]
+    e1 = np.exp(1j * th)
+    e = e1
+    out = []
+    for k in range(1, kmax + 1):
+        if k > 1:
+            e = e * e1
+        mc, ms, cc, ss, cs = angle[k - 1]
+        ye = y * e  # Σ y (c − mean) = Σ y cos kθ: y sums to 0 in each run
+        bc, bs = np.add.reduceat(np.stack([ye.real, ye.imag]), start, axis=1)
+        det = cc * ss - cs**2
+        good = det > 1e-12 * np.maximum(cc * ss, 1e-300)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            beta = np.stack([ss * bc - cs * bs, cc * bs - cs * bc], axis=1) / det[:, None]
+        for i in np.flatnonzero(~good):  # the angles do not tell cos from sin at this order
+            sl = slice(start[i], start[i] + int(n[i]))
+            X = np.column_stack([e.real[sl] - mc[i], e.imag[sl] - ms[i]])
+            beta[i] = np.linalg.lstsq(X, y[sl], rcond=None)[0]
+        explained = beta[:, 0] * bc + beta[:, 1] * bs
+        here = orders[seg_runs] >= k
+        out.append((k, seg_runs[here], beta[here], explained[here]))
+    return out
+
+
+def _within_runs(c, z, sig, ok, s, kept: Segments, kmax, spec, speed_groups=None, noise_run=None) -> list:
+    """Shaft-order and time-trend structure within runs, summed over runs (``kept``: the
+    channel's inlier samples by run; ``noise_run``: each run's median σ)."""
+    theta = kept.take(s.theta)
+    t = kept.take(s.time)
+    zk = kept.take(z)
+    n_runs = kept.n_runs
+    sig_run = kept.median(kept.take(sig)) if noise_run is None else np.asarray(noise_run)
     out = []
     stat_k = np.zeros(kmax + 1)
     dof_k = np.zeros(kmax + 1, int)
-    amp_k = [[] for _ in range(kmax + 1)]
-    zamp_k = [[] for _ in range(kmax + 1)]  # the same over the run's noise level
-    run_k = [[] for _ in range(kmax + 1)]
-    stat_t, dof_t, trend = 0.0, 0, []
-    for r in range(n_runs):
-        sel = index.of(r)
-        sel = sel[ok[sel]]
-        n = int(sel.size)
-        if n < 30:
-            continue
-        zr, th, tr = z[sel], theta[sel], t[sel]
-        rho = _lag1(zr)
+    amp_k: list = [None] * (kmax + 1)  # per order: the ripple's amplitude in each run [SI]
+    zamp_k: list = [None] * (kmax + 1)  # the same over the run's noise level
+    run_k: list = [None] * (kmax + 1)  # the runs
+    long = kept.n >= 30
+    inflate = np.ones(n_runs)
+    if long.any():
+        rho = kept.lag1(zk)
         inflate = (1 + rho) / (1 - rho)
-        # shaft orders resolved in this run: at least 6 samples per cycle of order k
-        dt = np.median(np.diff(tr)) if n > 1 else np.inf
-        step = abs(np.median(speed[sel])) * dt
-        span = np.ptp(np.unwrap(th)) if step < np.pi / 2 else 0.0
-        if span >= 2 * np.pi * 0.9:
-            orders = [k for k in range(1, kmax + 1) if step * k <= 2 * np.pi / 6]
-            if orders:
-                sig_r = np.median(sig[sel])
-                for k, beta, explained in _harmonic_fits(th, zr, len(orders)):
-                    stat_k[k] += explained / inflate
-                    dof_k[k] += 2
-                    amp_k[k].append(np.hypot(*beta) * sig_r)
-                    zamp_k[k].append(np.hypot(*beta))
-                    run_k[k].append(r)
-        # time trend within the run
-        if np.ptp(tr) > 0:
-            u = 2 * (tr - tr.min()) / np.ptp(tr) - 1
-            X = np.column_stack([u, 1.5 * u**2 - 0.5])
-            X = X - X.mean(axis=0)
-            beta, *_ = np.linalg.lstsq(X, zr - zr.mean(), rcond=None)
-            stat_t += np.sum((X @ beta) ** 2) / inflate
+    # shaft orders resolved in a run: at least 6 samples per cycle of order k
+    step, span = _sampling(np.asarray(s.theta), kept, t, theta, np.asarray(s.speed))
+    resolved = np.sum(step[:, None] * np.arange(1, kmax + 1)[None, :] <= 2 * np.pi / 6, axis=1)
+    harmonic = long & (span >= 2 * np.pi * 0.9) & (resolved > 0)
+    for k, runs, beta, explained in _harmonic_fits_by_run(np.asarray(s.theta), theta, zk, kept,
+                                                          np.where(harmonic, resolved, 0)):
+        size = np.hypot(beta[:, 0], beta[:, 1])
+        stat_k[k] = float(np.sum(explained / inflate[runs]))
+        dof_k[k] = 2 * runs.size
+        amp_k[k], zamp_k[k], run_k[k] = size * sig_run[runs], size, runs
+    # time trend within the run
+    ptp_t = kept.ptp(t)
+    trending = long & (ptp_t > 0)
+    stat_t, dof_t, trend = 0.0, 0, []
+    if trending.any():
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = 2 * (t - kept.extreme(t, False)[kept.run]) / ptp_t[kept.run] - 1
+        X = np.column_stack([u, 1.5 * u**2 - 0.5])
+        Xc = X - kept.mean(X)[kept.run]
+        y = kept.spread(zk)
+        S = kept.sum(np.column_stack([Xc[:, 0] ** 2, Xc[:, 1] ** 2, Xc[:, 0] * Xc[:, 1],
+                                      Xc[:, 0] * y, Xc[:, 1] * y]))
+        for r in np.flatnonzero(trending):
+            A = np.array([[S[r, 0], S[r, 2]], [S[r, 2], S[r, 1]]])
+            g = S[r, 3:5]
+            det = A[0, 0] * A[1, 1] - A[0, 1] ** 2
+            if det > 1e-12 * max(A[0, 0] * A[1, 1], 1e-300):
+                beta = np.array([A[1, 1] * g[0] - A[0, 1] * g[1], A[0, 0] * g[1] - A[0, 1] * g[0]]) / det
+            else:  # the times do not tell the two shapes apart: the least-norm solution
+                sl = slice(kept.start[r], kept.start[r] + kept.n[r])
+                beta = np.linalg.lstsq(Xc[sl], y[sl], rcond=None)[0]
+            stat_t += float(beta @ g) / inflate[r]
             dof_t += 2
-            trend.append(beta[0] * np.median(sig[sel]))
+            trend.append(beta[0] * sig_run[r])
     noise = float(np.median(sig[ok]))
     for k in range(1, kmax + 1):
         if dof_k[k] == 0:

@@ -96,6 +96,18 @@ def gauss_newton_chi2(JtJ, Jtr, rr: float, x0, positive, hold=None, rcond: float
     return float(max(rr + 2.0 * d @ g + d @ A @ d, 0.0))
 
 
+def thread_pool():
+    """Threads that fit on the cells two at a time (candidates, folds, region splits: their compiled
+    programs run outside Python's lock; each fit's numbers are the same whatever the order); one
+    where the machine has one core, or as many as ``MOTORID_DIAGNOSE_THREADS`` says."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    n = os.environ.get("MOTORID_DIAGNOSE_THREADS")
+    workers = int(n) if n and n.isdigit() and int(n) > 0 else min(2, os.cpu_count() or 1)
+    return ThreadPoolExecutor(max_workers=workers)
+
+
 class Screen:
     """The reduced data of a campaign, with the base fit's noise and inliers held."""
 
@@ -119,15 +131,33 @@ class Screen:
                 self.counts[c] = np.concatenate([cnt, np.zeros(w[c].size - cnt.size)])
         self._run = self.template.entry_runs(dataset)
         self._coverage: dict = {}  # parameter names → what the data cannot see (coverage_reasons)
+        self._expansions: dict = {}  # Screen._expansion_key → its Expansion, or None: not quadratic
 
     @property
     def n_cells(self) -> int:
         return self.template.n_cells
 
+    @staticmethod
+    def _expansion_key(prob) -> tuple:
+        """What the quadratic expansion of a problem's cell predictions depends on: the model, the
+        free parameters and the held ones with their values."""
+        return (tuple(m.id for m in prob.mechanisms), tuple(prob.free),
+                tuple(sorted((k, float(v)) for k, v in prob.held.items())))
+
+    def _remember_expansion(self, prob) -> None:
+        """Keep what a solve learnt of ``prob``'s expansion (built, or the model is not quadratic), so
+        that the next problem of the same model, free and held parameters does not build it again
+        (each build evaluates Hessians on sampled cells; many screening fits share one model)."""
+        if prob.expansion_key == tuple(prob.free):
+            self._expansions[self._expansion_key(prob)] = prob.expansion
+
     def _problem(self, mechanisms, free, held, weights=None) -> Problem:
         prob = copy.copy(self.template)
         prob.free, prob.held, prob.mechanisms = list(free), dict(held), tuple(mechanisms)
         prob.expansion = prob.expansion_key = prob.compressed = None
+        key = self._expansion_key(prob)
+        if key in self._expansions:  # an exact quadratic expansion holds at any point: reused
+            prob.expansion, prob.expansion_key = self._expansions[key], tuple(prob.free)
         if weights is not None:
             prob.cells = (self.template.cells[0], weights)
             prob.cells_version = next(_versions)
@@ -156,6 +186,7 @@ class Screen:
         prob = self._problem(mechanisms, free, held, weights)
         values = {k: float(start[k]) for k in free}
         values, _, _, free, _ = solve(prob, values, free, reasons, opt, first=True)
+        self._remember_expansion(prob)
         chi2 = backend_for(prob, values, free, opt).chi2(values) if free else self._chi2(prob, values)
         if not np.isfinite(chi2):
             chi2 = np.inf
@@ -289,5 +320,6 @@ class Screen:
 
     def held_out_chi2(self, mechanisms, initial: dict, folds: list) -> float:
         """χ² of each fold's runs predicted by a fit on the other runs, summed over the folds
-        (:meth:`chi2_of`)."""
-        return sum(self.chi2_of(self.fit_without(mechanisms, initial, fold), fold) for fold in folds)
+        (:meth:`chi2_of`); the folds fitted two at a time (:func:`thread_pool`)."""
+        with thread_pool() as pool:
+            return sum(pool.map(lambda fold: self.chi2_of(self.fit_without(mechanisms, initial, fold), fold), folds))

@@ -32,7 +32,7 @@ import numpy as np
 
 from motorid._aot import cached_jit, trim_heap
 from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
-from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen
+from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen, thread_pool
 from motorid.discrepancy.unexplained import extrapolation_check
 from motorid.discrepancy.verdicts import caveats, refuse_cancelling_pair, ripple_gain_only, widen_for_the_ripple_model
 from motorid.identify.least_squares import fit_least_squares
@@ -187,18 +187,6 @@ def _prediction_starts(current: dict, mech, dataset=None) -> list:
     return _starts(current, mech, dataset) + [{**current, **mech.neutral()}]
 
 
-def _pool():
-    """Threads that screen candidates two at a time (their compiled programs run outside Python's lock;
-    each candidate's numbers are the same whatever the order); one where the machine has one core, or as
-    many as ``MOTORID_DIAGNOSE_THREADS`` says."""
-    import os
-    from concurrent.futures import ThreadPoolExecutor
-
-    n = os.environ.get("MOTORID_DIAGNOSE_THREADS")
-    workers = int(n) if n and n.isdigit() and int(n) > 0 else min(2, os.cpu_count() or 1)
-    return ThreadPoolExecutor(max_workers=workers)
-
-
 def _screen_candidates(screen, catalog, current_mechs, current, channels, dataset, n_res, say,
                        wandering: dict | None = None) -> list:
     """Every catalog mechanism that shows where structure was found, ranked by the χ² a
@@ -217,7 +205,7 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
     def rank(mech):
         return screen.predicted_chi2(current_mechs + [mech], _prediction_starts(current.params_all, mech, dataset))
 
-    with _pool() as pool:  # candidates are independent: two at a time where the machine has the cores
+    with thread_pool() as pool:  # candidates are independent: two at a time where the machine has the cores
         chi2s = list(bar(pool.map(rank, todo), total=len(todo), desc="candidates (linear update)", unit="mechanism"))
     predicted = [(current.chi2 - chi2, mech) for chi2, mech in zip(chi2s, todo)]
     predicted.sort(key=lambda x: -x[0])
@@ -231,7 +219,7 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
         cached_jit.release(mech)  # its compiled programs: memory does not grow with the catalog
         return fit
 
-    with _pool() as pool:
+    with thread_pool() as pool:
         fits = list(bar(pool.map(fit_one, chosen), total=len(chosen), desc="candidates (fit on the cells)",
                         unit="mechanism"))
     for mech, fit in zip(chosen, fits):

@@ -95,28 +95,36 @@ def extrapolation_check(screen, mechanisms, cells_fit) -> dict:
     about them, :meth:`Screen.scatter_of`); a split whose training half does not determine those
     parameters does not count.
     """
-    splits, passed = [], True
+    from motorid.discrepancy.screen import thread_pool
+
     # K_L(θ)'s harmonics are held at the all-runs fit: a shape over shaft angle, not a law over the
     # operating region, and one the coarse cells bias by a few per cent at speed (they take the ripple
     # at a cell's mean angle); refitted on the fast half alone, that bias, times a large leakage, failed
     # the slow half by 80 times its expected excess with the true model (a port-A meter gain)
     ripple = tuple(k for k in cells_fit.free if k.startswith("KL_"))
+    todo = []
     for (low_words, high_words), run_low in region_masks(screen.dataset).items():
         for train_low, label in ((True, f"fit on {low_words}, predict {high_words}"),
                                  (False, f"fit on {high_words}, predict {low_words}")):
-            predicted = np.flatnonzero(~run_low if train_low else run_low)
-            fit = screen.fit_without(mechanisms, cells_fit.values, predicted, hold=ripple)
-            scatter = screen.scatter_of(predicted)
-            held = screen.chi2_of(fit, predicted) + scatter
-            ref = screen.chi2_of(cells_fit, predicted) + scatter
-            excess = held - ref
-            expected = screen.expected_excess(fit, predicted)
-            std = screen.parameter_std(fit)  # the candidate's and those already named: a Stribeck law fitted
-            determined = all(_determined(fit.values, std, m) for m in mechanisms)  # on fast runs predicts nothing
-            bad = determined and excess > max(MIN_EXCESS, EXCESS_FRACTION * ref, EXPECTED_FACTOR * expected)
-            passed = passed and not bad
-            splits.append({"split": label, "held_out_chi2": held, "all_runs_chi2": ref, "excess": excess,
-                           "expected_excess": expected, "determined": bool(determined), "failed": bool(bad)})
+            todo.append((label, np.flatnonzero(~run_low if train_low else run_low)))
+
+    def one(item):
+        label, predicted = item
+        fit = screen.fit_without(mechanisms, cells_fit.values, predicted, hold=ripple)
+        scatter = screen.scatter_of(predicted)
+        held = screen.chi2_of(fit, predicted) + scatter
+        ref = screen.chi2_of(cells_fit, predicted) + scatter
+        excess = held - ref
+        expected = screen.expected_excess(fit, predicted)
+        std = screen.parameter_std(fit)  # the candidate's and those already named: a Stribeck law fitted
+        determined = all(_determined(fit.values, std, m) for m in mechanisms)  # on fast runs predicts nothing
+        bad = determined and excess > max(MIN_EXCESS, EXCESS_FRACTION * ref, EXPECTED_FACTOR * expected)
+        return {"split": label, "held_out_chi2": held, "all_runs_chi2": ref, "excess": excess,
+                "expected_excess": expected, "determined": bool(determined), "failed": bool(bad)}
+
+    with thread_pool() as pool:  # the splits are independent: fitted two at a time
+        splits = list(pool.map(one, todo))
+    passed = not any(sp["failed"] for sp in splits)
     return {"passed": passed, "splits": splits}
 
 
