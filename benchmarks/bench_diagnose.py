@@ -123,7 +123,9 @@ def run(quick: bool = False) -> str:
         dg = [_timed([py, "-m", "motorid", "diagnose", *common, "--out", tmp / "dg"], env) for _ in range(3)]
         named = [m["id"] for m in json.loads((tmp / "dg" / "diagnosis.json").read_text())["mechanisms"]]
         base = None
-        if not quick:
+        # BENCH_DIAGNOSE_BASELINE=0 skips the old diagnose (12 minutes on 2 cores): its row is then the
+        # last measured one, said so
+        if not quick and os.environ.get("BENCH_DIAGNOSE_BASELINE") != "0":
             base = _timed([py, str(HERE / "diagnose_baseline.py"), log, motor, tmp / "base.json"], env)
             base_named = json.loads((tmp / "base.json").read_text())["mechanisms"]
         os.environ["MOTORID_CACHE_DIR"] = env["MOTORID_CACHE_DIR"]
@@ -152,6 +154,9 @@ def run(quick: bool = False) -> str:
     if base is not None:
         lines.append(f"| old diagnose (baseline) | — | {base[0]:.1f} s | {base[1]:.2f} GiB | "
                      f"{', '.join(base_named) or 'none'} |")
+    elif not quick:
+        lines.append("| old diagnose (baseline), as last measured (commit d961243, not rerun: "
+                     "BENCH_DIAGNOSE_BASELINE=0) | — | 750.5 s | 2.86 GiB | stribeck_friction, compressibility_flow |")
     lines += ["", "| goal | value | |", "|---|---:|---|",
               f"| diagnose wall ≤ 3 × fit wall | {dg_w / fit_w:.2f} × | {'**met**' if dg_w <= 3 * fit_w else '**not met**'} |",
               f"| diagnose peak RSS ≤ 1.5 × fit's | {dg_m / fit_m:.2f} × | {'**met**' if dg_m <= 1.5 * fit_m else '**not met**'} |"]

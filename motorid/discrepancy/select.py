@@ -31,10 +31,11 @@ import jax
 import numpy as np
 
 from motorid._aot import cached_jit, trim_heap
-from motorid.discrepancy.locate import CHANNEL_WORDS, Location, locate
+from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT, Location, locate
 from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen, thread_pool
 from motorid.discrepancy.unexplained import extrapolation_check
-from motorid.discrepancy.verdicts import caveats, refuse_cancelling_pair, ripple_gain_only, widen_for_the_ripple_model
+from motorid.discrepancy.verdicts import (LINEARITY_SHARE, caveats, refuse_cancelling_pair, ripple_gain_only,
+                                         transducer_like, widen_for_the_ripple_model)
 from motorid.identify.least_squares import fit_least_squares
 from motorid.identify.types import FitOptions, FitResult
 from motorid.physics.registry import all_mechanisms
@@ -421,6 +422,18 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
             after_keys = {_structure_key(s) for s in after.significant}
             removed = [s for s in loc.significant if _structure_key(s) in before_keys - after_keys]
             if cand.delta_bic > min_evidence and (removed or len(after.significant) < len(loc.significant)):
+                like = transducer_like(cand.mechanism, cand.fit)
+                if like is not None:  # a wrong name is worse than none: a transducer's curve says it as well
+                    unit, f = UNIT[like["channel"]]
+                    why = (f"what it adds to the {CHANNEL_WORDS[like['channel']]} (at most {like['size'] * f:.3g} {unit}, "
+                           f"{100 * like['share']:.2g} % of the reading scale) is a smooth curve of the reading itself "
+                           f"({100 * like['calibration_share']:.0f} % of it) within a transducer's linearity "
+                           f"({100 * LINEARITY_SHARE:.2g} % of its scale): too small to tell from the transducer's own "
+                           "calibration curve, or to tell which cause it is")
+                    say(f"not named {cand.mechanism.id}: {why}")
+                    refused.append({"id": cand.mechanism.id, "why": why, "extrapolation": None, "transducer_like": like})
+                    limit = min(limit + 1, cv_top + REGION_TRIES)
+                    continue
                 if check_regions:  # issue 15: a name must also predict where it was not fitted
                     cand.extrapolation = extrapolation_check(screen, current_mechs + [cand.mechanism], cand.cells)
                     lap("operating regions on the cells")

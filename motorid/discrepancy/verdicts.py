@@ -97,3 +97,66 @@ def caveats(accepted: list, dataset) -> dict:
             "kinematics, a real motor's valve-plate timing may move them further; runs at a second back "
             "pressure determine the gain")
     return out
+
+
+#: a transducer's linearity class: a smooth error curve of its own reading up to this share of its reading
+#: scale (the 99th percentile of |reading|) is within what a calibrated bench transducer holds (torque
+#: transducers 0.05-0.1 % of full scale, flow meters 0.1-0.5 % of reading)
+LINEARITY_SHARE = 1e-3
+#: a mechanism's change of a channel is calibration-like where a smooth curve of the reading explains it but
+#: for this share of its size (the 99th percentiles of |change| and of |what the curve leaves|)
+CALIBRATION_LIKE = 0.25
+
+
+def _calibration_curve_left(change, reading, scale) -> np.ndarray:
+    """What a smooth calibration curve of the reading (1, y, y|y|, y², y³ in y = reading / scale) leaves
+    of ``change`` (least squares)."""
+    y = reading / scale
+    X = np.column_stack([np.ones_like(y), y, y * np.abs(y), y**2, y**3])
+    beta = np.linalg.lstsq(X, change, rcond=None)[0]
+    return change - X @ beta
+
+
+def transducer_like(mechanism, fit) -> dict | None:
+    """Whether what ``mechanism`` adds in ``fit`` (a fit on every sample with it in the model) could be a
+    transducer's own calibration error: in every channel it acts on, its change of the predictions (its
+    values against its neutral ones) is a smooth curve of that channel's reading (:data:`CALIBRATION_LIKE`)
+    and smaller than the transducer's linearity class (:data:`LINEARITY_SHARE` of the reading scale).  A
+    filling loss ∝ ω² of 0.04 % of the port flow is a flow meter's curvature as well, and a gain error of
+    0.015 % its slope: which of the two (or the meter's curvature, or a law of the motor) it is, the data
+    do not say.  A change that is the same at every sample (a transducer's zero offset) is exempt: its
+    name says what it is at any size.
+    → {channel, size, scale, share, calibration_share} of the channel where the change is largest, when
+    transducer-like; None otherwise (or where it cannot be taken)."""
+    prob = getattr(fit, "problem", None)
+    if prob is None or not hasattr(prob, "predictions") or any(k in prob.held for k in mechanism.parameters):
+        return None
+    neutral = mechanism.neutral()
+    values = {k: float(fit.params_all[k]) for k in prob.free}
+    with_it = prob.predictions(values)
+    without = prob.predictions({k: float(neutral.get(k, v)) for k, v in values.items()})
+    obs = prob.observed()
+    largest, seen = None, False
+    for c in mechanism.channels:
+        if c not in with_it or c not in obs or c not in fit.inliers:
+            continue
+        ok = np.asarray(fit.inliers[c], bool) & np.isfinite(obs[c])
+        if ok.sum() < 20:
+            continue
+        change = (np.asarray(with_it[c]) - np.asarray(without[c]))[ok]
+        reading = np.asarray(obs[c])[ok]
+        scale = float(np.quantile(np.abs(reading), 0.99))
+        if not scale > 0 or not np.all(np.isfinite(change)):
+            return None
+        seen = True
+        if change.size and np.ptp(change) <= 1e-9 * np.max(np.abs(change)):
+            return None  # a constant: a zero offset, named as such
+        size = float(np.quantile(np.abs(change), 0.99))
+        left = float(np.quantile(np.abs(_calibration_curve_left(change, reading, scale)), 0.99)) if size > 0 else 0.0
+        if size >= LINEARITY_SHARE * scale or left >= CALIBRATION_LIKE * size:
+            return None  # beyond a transducer's linearity, or a shape no calibration curve of the reading has
+        entry = {"channel": c, "size": size, "scale": scale, "share": size / scale,
+                 "calibration_share": 1.0 - left / size if size > 0 else 1.0}
+        if largest is None or entry["share"] > largest["share"]:
+            largest = entry
+    return largest if seen else None
