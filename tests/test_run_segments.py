@@ -73,3 +73,22 @@ def test_lag_one_and_run_table_match_a_loop_over_runs(runs):
         n_eff = v.size * (1 - rho) / (1 + rho)
         assert mean[r] == pytest.approx(v.mean(), rel=1e-12)
         assert se[r] == pytest.approx(max(np.std(v), 1.0) / np.sqrt(max(n_eff, 1.0)), rel=1e-10)
+
+
+def test_a_nan_stays_in_its_own_run(runs):
+    """np.median's NaN for a run that holds one; an angle's NaN does not spread to the runs after it;
+    run numbers outside the index are in no run."""
+    run_of, n_runs, x, z, t, theta, wrapped, mask = runs
+    x, wrapped = x.copy(), wrapped.copy()
+    first = np.flatnonzero(run_of == 0)[7]
+    x[first] = np.nan
+    wrapped[first] = np.nan
+    seg = RunIndex(run_of, n_runs).kept()
+    med = seg.median(seg.take(x))
+    assert np.isnan(med[0]) and np.all(np.isfinite(med[[2, 3, 4]]))
+    span = seg.unwrapped_ptp(seg.take(wrapped))
+    want = _loop(run_of, n_runs, np.ones_like(mask), lambda s: np.ptp(np.unwrap(wrapped[s])))
+    np.testing.assert_allclose(span[[2, 3, 4]], want[[2, 3, 4]], rtol=1e-9)
+    stray = np.concatenate([run_of, [-1, n_runs]])
+    seg2 = RunIndex(stray, n_runs).kept()
+    assert list(seg2.n) == list(seg.n) and seg2.idx.size == seg.idx.size

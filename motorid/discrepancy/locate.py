@@ -320,24 +320,27 @@ _ANGLE_SUMS_KEPT = 16
 def _mask_key(theta_all, kept: Segments, *extra) -> tuple:
     import hashlib
 
-    digest = hashlib.blake2b(b"".join([kept.idx.tobytes(), *(np.asarray(x).tobytes() for x in extra)]),
+    digest = hashlib.blake2b(b"".join([kept.idx.tobytes(), kept.n.tobytes(),
+                                       *(np.asarray(x).tobytes() for x in extra)]),
                              digest_size=16).digest()
     return id(theta_all), theta_all.size, digest
 
 
-def _kept_for(key, theta_all, compute):
-    """``compute()`` for a channel mask, kept for the masks seen last (:data:`_ANGLE_SUMS`)."""
+def _kept_for(key, arrays: tuple, compute):
+    """``compute()`` for a channel mask, kept for the masks seen last (:data:`_ANGLE_SUMS`); ``arrays``:
+    the per-sample arrays it reads, whose ids are in ``key`` (held with the value: an id is not reused
+    while its array lives)."""
     hit = _ANGLE_SUMS.get(key)
-    if hit is not None and hit[0] is theta_all:
+    if hit is not None and all(a is b for a, b in zip(hit[0], arrays)):
         return hit[1]
     value = compute()
-    if len(_ANGLE_SUMS) >= _ANGLE_SUMS_KEPT:
-        _ANGLE_SUMS.pop(next(iter(_ANGLE_SUMS)))
-    _ANGLE_SUMS[key] = (theta_all, value)  # the array held: its id is not reused while kept
+    while len(_ANGLE_SUMS) >= _ANGLE_SUMS_KEPT:
+        _ANGLE_SUMS.pop(next(iter(_ANGLE_SUMS)), None)
+    _ANGLE_SUMS[key] = (arrays, value)
     return value
 
 
-def _sampling(theta_all, kept: Segments, t, theta, speed) -> tuple:
+def _sampling(theta_all, kept: Segments, t, theta, speed, time_all) -> tuple:
     """Per run: the shaft angle a sample step covers (|median speed| × median time step) [rad]
     and the range of the unwrapped angle where steps are under a quarter turn [rad]."""
 
@@ -348,7 +351,8 @@ def _sampling(theta_all, kept: Segments, t, theta, speed) -> tuple:
             span = np.where(step < np.pi / 2, kept.unwrapped_ptp(theta), 0.0)
         return step, span
 
-    return _kept_for(_mask_key(theta_all, kept, b"sampling"), theta_all, compute)
+    return _kept_for((id(speed), id(time_all)) + _mask_key(theta_all, kept, b"sampling"),
+                     (theta_all, speed, time_all), compute)
 
 
 def _angle_sums(theta_all, kept: Segments, theta, runs, start, n, row, kmax: int) -> list:
@@ -369,7 +373,7 @@ def _angle_sums(theta_all, kept: Segments, theta, runs, start, n, row, kmax: int
             out.append((mc, ms, tot[2] - n * mc * mc, tot[3] - n * ms * ms, tot[4] - n * mc * ms))
         return out
 
-    return _kept_for(_mask_key(theta_all, kept, runs, np.int64(kmax)), theta_all, compute)
+    return _kept_for(_mask_key(theta_all, kept, runs, np.int64(kmax)), (theta_all,), compute)
 
 
 def _harmonic_fits_by_run(theta_all, theta, z, kept: Segments, orders):
@@ -436,7 +440,7 @@ def _within_runs(c, z, sig, ok, s, kept: Segments, kmax, spec, speed_groups=None
         rho = kept.lag1(zk)
         inflate = (1 + rho) / (1 - rho)
     # shaft orders resolved in a run: at least 6 samples per cycle of order k
-    step, span = _sampling(np.asarray(s.theta), kept, t, theta, np.asarray(s.speed))
+    step, span = _sampling(np.asarray(s.theta), kept, t, theta, np.asarray(s.speed), np.asarray(s.time))
     resolved = np.sum(step[:, None] * np.arange(1, kmax + 1)[None, :] <= 2 * np.pi / 6, axis=1)
     harmonic = long & (span >= 2 * np.pi * 0.9) & (resolved > 0)
     for k, runs, beta, explained in _harmonic_fits_by_run(np.asarray(s.theta), theta, zk, kept,

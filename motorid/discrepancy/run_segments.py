@@ -41,7 +41,9 @@ class Segments:
 
     def __init__(self, index: RunIndex, mask=None):
         order = index.order
-        keep = np.ones(order.size, bool) if mask is None else np.asarray(mask, bool)[order]
+        keep = np.ones(order.size, bool) if mask is None else np.asarray(mask, bool)[order].copy()
+        keep[:index.bounds[0]] = False  # run numbers outside 0 … n_runs − 1: in no run
+        keep[index.bounds[-1]:] = False
         cum = np.concatenate([[0], np.cumsum(keep)])
         self.start = cum[index.bounds[:-1]]
         self.n = cum[index.bounds[1:]] - self.start
@@ -109,7 +111,7 @@ class Segments:
         ddmod[(ddmod == -np.pi) & (dd > 0)] = np.pi
         correct = ddmod - dd
         correct[np.abs(dd) < np.pi] = 0.0
-        correct[~self.same] = 0.0  # no unwrapping across two runs
+        correct[~self.same | ~np.isfinite(correct)] = 0.0  # no unwrapping across two runs, nor past a NaN
         total = np.concatenate([[0.0], np.cumsum(correct)])
         return self.ptp(theta + (total - total[self.start.clip(max=max(total.size - 1, 0))][self.run]))
 
@@ -140,4 +142,7 @@ def segment_median(x, run, n, start, n_runs: int) -> np.ndarray:
     lo = start[ne] + (n[ne] - 1) // 2
     hi = start[ne] + n[ne] // 2
     out[ne] = 0.5 * (sx[lo] + sx[hi])
+    nan = np.isnan(x)
+    if nan.any():  # np.median's: NaN where a run holds one
+        out[np.bincount(run[nan], minlength=n_runs) > 0] = np.nan
     return out

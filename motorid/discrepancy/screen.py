@@ -131,7 +131,7 @@ class Screen:
                 self.counts[c] = np.concatenate([cnt, np.zeros(w[c].size - cnt.size)])
         self._run = self.template.entry_runs(dataset)
         self._coverage: dict = {}  # parameter names → what the data cannot see (coverage_reasons)
-        self._expansions: dict = {}  # Screen._expansion_key → its Expansion, or None: not quadratic
+        self._expansions: dict = {}  # Screen._expansion_key → None: the model is not quadratic
 
     @property
     def n_cells(self) -> int:
@@ -145,19 +145,21 @@ class Screen:
                 tuple(sorted((k, float(v)) for k, v in prob.held.items())))
 
     def _remember_expansion(self, prob) -> None:
-        """Keep what a solve learnt of ``prob``'s expansion (built, or the model is not quadratic), so
-        that the next problem of the same model, free and held parameters does not build it again
-        (each build evaluates Hessians on sampled cells; many screening fits share one model)."""
-        if prob.expansion_key == tuple(prob.free):
-            self._expansions[self._expansion_key(prob)] = prob.expansion
+        """Keep what a solve learnt of ``prob``'s model: that it is not quadratic in its free parameters
+        (no expansion), so that the next problem of the same model, free and held parameters does not try
+        again (each try evaluates Hessians on sampled cells; many screening fits share one model).  A
+        built expansion is not kept: its exactness was checked near its own start, and it holds every
+        cell's terms."""
+        if prob.expansion_key == tuple(prob.free) and prob.expansion is None:
+            self._expansions[self._expansion_key(prob)] = None
 
     def _problem(self, mechanisms, free, held, weights=None) -> Problem:
         prob = copy.copy(self.template)
         prob.free, prob.held, prob.mechanisms = list(free), dict(held), tuple(mechanisms)
         prob.expansion = prob.expansion_key = prob.compressed = None
         key = self._expansion_key(prob)
-        if key in self._expansions:  # an exact quadratic expansion holds at any point: reused
-            prob.expansion, prob.expansion_key = self._expansions[key], tuple(prob.free)
+        if key in self._expansions:  # known not to be quadratic: the full problem at once
+            prob.expansion, prob.expansion_key = None, tuple(prob.free)
         if weights is not None:
             prob.cells = (self.template.cells[0], weights)
             prob.cells_version = next(_versions)

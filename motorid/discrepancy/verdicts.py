@@ -141,17 +141,23 @@ def transducer_like(mechanism, fit) -> dict | None:
         if c not in with_it or c not in obs or c not in fit.inliers:
             continue
         ok = np.asarray(fit.inliers[c], bool) & np.isfinite(obs[c])
-        if ok.sum() < 20:
+        if ok.sum() < 3:
             continue
         change = (np.asarray(with_it[c]) - np.asarray(without[c]))[ok]
         reading = np.asarray(obs[c])[ok]
         scale = float(np.quantile(np.abs(reading), 0.99))
         if not scale > 0 or not np.all(np.isfinite(change)):
             return None
-        seen = True
-        if change.size and np.ptp(change) <= 1e-9 * np.max(np.abs(change)):
-            return None  # a constant: a zero offset, named as such
         size = float(np.quantile(np.abs(change), 0.99))
+        if ok.sum() < 20:  # too few (breakaway events) for a curve: it only must stay within the linearity
+            if size >= LINEARITY_SHARE * scale:
+                return None
+            continue
+        if not np.any(change):
+            continue  # it does not act on this channel here
+        seen = True
+        if np.ptp(change) <= 1e-9 * np.max(np.abs(change)):
+            return None  # a constant: a zero offset, named as such
         left = float(np.quantile(np.abs(_calibration_curve_left(change, reading, scale)), 0.99)) if size > 0 else 0.0
         if size >= LINEARITY_SHARE * scale or left >= CALIBRATION_LIKE * size:
             return None  # beyond a transducer's linearity, or a shape no calibration curve of the reading has

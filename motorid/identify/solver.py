@@ -339,7 +339,7 @@ def gauss_newton_start(problem: Problem, values: dict, free: list, reasons: dict
         if not np.all(np.isfinite(step)) or not np.isfinite(after) or after > before:
             break  # Gauss-Newton does not improve here: leave the rest to Levenberg-Marquardt
         values = trial
-        if np.max(np.abs(step)) < 1e-10 or before - after <= GN_SETTLED * before:
+        if np.max(np.abs(step)) < 1e-10 or (np.isfinite(before) and before - after <= GN_SETTLED * before):
             break  # settled: a further step changes χ² below Levenberg-Marquardt's own tolerance
     for k in free:
         info = model.parameter_info(k, mechs)
