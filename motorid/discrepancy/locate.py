@@ -355,7 +355,7 @@ def _sampling(theta_all, kept: Segments, t, theta, speed, time_all) -> tuple:
                      (theta_all, speed, time_all), compute)
 
 
-def _angle_sums(theta_all, kept: Segments, theta, runs, start, n, row, kmax: int) -> list:
+def _angle_sums(theta_all, kept: Segments, theta, runs, start, n, kmax: int) -> list:
     """Per order k = 1 … ``kmax`` and fitted run: (mean cos kθ, mean sin kθ, Σc², Σs², Σcs) of the
     run-centred c = cos kθ − mean, s = sin kθ − mean → [(mc, ms, cc, ss, cs)].  They depend on
     the shaft angles and the mask alone, so they are kept for the masks seen last."""
@@ -380,8 +380,9 @@ def _harmonic_fits_by_run(theta_all, theta, z, kept: Segments, orders):
     """Each shaft order k = 1 … ``orders[r]`` (0: none) fitted alone, with an intercept (a run's offset is
     not angle structure), to run r's kept samples, in every run at once:
     z − z̄ ≈ a (cos kθ − mean) + b (sin kθ − mean), from the 2×2 normal equations of each order (the
-    numbers of one least-squares solve per run and order); ``theta``, ``z`` are the kept samples (``theta``, ``z`` in segment order; ``theta_all`` the per-sample array they
-    were taken from) → [(k, runs, (a, b) per run, Σ fit² per run)] for each order fitted in some run."""
+    numbers of one least-squares solve per run and order); ``theta``, ``z``: the kept samples in segment
+    order, ``theta_all`` the per-sample array they were taken from → [(k, runs, (a, b) per run, Σ fit² per
+    run)] for each order fitted in some run."""
     orders = np.asarray(orders, dtype=int)
     kmax = int(orders.max(initial=0))
     if kmax == 0:
@@ -395,7 +396,7 @@ def _harmonic_fits_by_run(theta_all, theta, z, kept: Segments, orders):
     local = np.full(kept.n_runs, -1)
     local[seg_runs] = np.arange(seg_runs.size)
     row = local[run]
-    angle = _angle_sums(theta_all, kept, th, runs, start, n, row, kmax)
+    angle = _angle_sums(theta_all, kept, th, runs, start, n, kmax)
     y = zz - (np.add.reduceat(zz, start) / n)[row]
     e1 = np.exp(1j * th)
     e = e1
@@ -420,14 +421,14 @@ def _harmonic_fits_by_run(theta_all, theta, z, kept: Segments, orders):
     return out
 
 
-def _within_runs(c, z, sig, ok, s, kept: Segments, kmax, spec, speed_groups=None, noise_run=None) -> list:
+def _within_runs(c, z, sig, ok, s, kept: Segments, kmax, spec, speed_groups, noise_run) -> list:
     """Shaft-order and time-trend structure within runs, summed over runs (``kept``: the
     channel's inlier samples by run; ``noise_run``: each run's median σ)."""
     theta = kept.take(s.theta)
     t = kept.take(s.time)
     zk = kept.take(z)
     n_runs = kept.n_runs
-    sig_run = kept.median(kept.take(sig)) if noise_run is None else np.asarray(noise_run)
+    sig_run = np.asarray(noise_run)
     out = []
     stat_k = np.zeros(kmax + 1)
     dof_k = np.zeros(kmax + 1, int)

@@ -15,17 +15,14 @@ import numpy as np
 
 
 class RunIndex:
-    """Each run's samples, in time order: ``of(r)`` → their indices (a stable sort of the run
-    numbers, made once; a run's samples are then a slice, not a mask over every sample)."""
+    """The samples ordered run by run, in time order within each (a stable sort of the run numbers,
+    made once): ``order``, and ``bounds`` where each run's slice of it starts and ends."""
 
     def __init__(self, run_of, n_runs: int):
-        self.run_of = np.asarray(run_of, dtype=int)
+        run_of = np.asarray(run_of, dtype=int)
         self.n_runs = int(n_runs)
-        self.order = np.argsort(self.run_of, kind="stable")
-        self.bounds = np.searchsorted(self.run_of[self.order], np.arange(n_runs + 1))
-
-    def of(self, r: int) -> np.ndarray:
-        return self.order[self.bounds[r]:self.bounds[r + 1]]
+        self.order = np.argsort(run_of, kind="stable")
+        self.bounds = np.searchsorted(run_of[self.order], np.arange(n_runs + 1))
 
     def kept(self, mask=None) -> Segments:
         """The samples where ``mask`` holds (every sample: None), as run segments."""
