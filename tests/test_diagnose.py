@@ -123,7 +123,9 @@ def test_diagnose_cli_writes_diagnosis_json(tmp_path, capsys, monkeypatch):
         else:
             assert not res["parameters"][k]["identifiable"], k
     assert res["fit"]["warnings"] == own["fit"]["warnings"]
-    assert res["fit"]["chi2"] == pytest.approx(own["fit"]["chi2"], rel=1e-9)
+    # the same fit: diagnose's noise rounds start from its finalist's residuals, a fit's from its own first
+    # round, so their noise levels (the χ²'s weights) are estimated at points a little apart
+    assert res["fit"]["chi2"] == pytest.approx(own["fit"]["chi2"], rel=1e-6)
     points = tmp_path / "points.csv"
     points.write_text("point_id,speed_rpm,p_a_bar,p_b_bar,oil_temp_C\nP1,1000,150,5,50\n")
     assert main(["predict", str(tmp_path), str(points), "--out", str(tmp_path / "pred.csv")]) == 0

@@ -1,6 +1,7 @@
 """motorid.identify.solver: the small dense Cholesky of the Levenberg-Marquardt step, and the solve."""
 
 import numpy as np
+import pytest
 
 from motorid.identify.solver import cholesky, cholesky_solve
 
@@ -103,3 +104,49 @@ def test_blockwise_levenberg_marquardt_lands_where_optimistix_does():
     assert abs(chi_a - chi_b) <= 1e-8 * chi_a
     for k in ls.free:
         assert abs(a[k] - b[k]) <= 1e-3 * ls.std[k] + 1e-12 * abs(a[k]), k
+
+
+def test_noise_rounds_seeded_by_a_near_optimum_fit_skip_the_first_round_and_end_at_the_same_fit():
+    """FitOptions.start_residuals (diagnose's final fit, seeded by its last finalist): the first noise
+    round's robust estimate and outlier test are taken from the residuals given, so one solve fewer is
+    run, and the fit ends where a fit from scratch ends: the same outliers, values within 1 % of a
+    standard error, standard errors, noise levels and χ² within 0.1 % (the noise levels, the χ²'s
+    weights, are estimated from residuals at slightly different points: here 1e-4 apart)."""
+    import motorid.identify.least_squares as LS
+    from conftest import DEMO_TRUTH, simulated
+    from motorid.identify.extract import extract
+    from motorid.identify.types import FitOptions
+    from motorid.physics.registry import get
+
+    truth = dict(DEMO_TRUTH, **{"stribeck_friction.T_s": 1.5, "stribeck_friction.K_p": 2e-3,
+                                "stribeck_friction.w_s": 0.4})
+    frame, spec, _ = simulated(seed=4, truth_items=tuple(sorted(truth.items())))
+    data, mech = extract(frame, spec), get("stribeck_friction")
+    base = LS.fit_least_squares(data, spec)
+    held = FitOptions(fixed_noise={**base.noise_by_run, "breakaway": base.sigma["breakaway"]},
+                      fixed_inliers=dict(base.inliers), uncertainty=False)
+    finalist = LS.fit_least_squares(data, spec, [mech], held, initial=base.params_all)  # the base fit's noise
+    solves = []
+    real_solve = LS.solve
+
+    def counted(*args, **kwargs):
+        solves.append(kwargs.get("first", args[-1] if len(args) > 5 else None))
+        return real_solve(*args, **kwargs)
+
+    LS.solve = counted
+    try:
+        scratch = LS.fit_least_squares(data, spec, [mech], initial=finalist.params_all)
+        n_scratch, solves[:] = len(solves), []
+        seeded = LS.fit_least_squares(data, spec, [mech], FitOptions(start_residuals=finalist.residuals),
+                                      initial=finalist.params_all)
+        n_seeded = len(solves)
+    finally:
+        LS.solve = real_solve
+    assert n_seeded == n_scratch - 1
+    assert seeded.free == scratch.free and seeded.outliers == scratch.outliers
+    for k in scratch.free:
+        assert abs(seeded.values[k] - scratch.values[k]) <= 1e-2 * scratch.std[k], k
+        assert seeded.std[k] == pytest.approx(scratch.std[k], rel=1e-3), k
+    for c, v in scratch.noise.items():
+        assert seeded.noise[c] == pytest.approx(v, rel=1e-3), c
+    assert seeded.chi2 == pytest.approx(scratch.chi2, rel=1e-3)

@@ -196,6 +196,10 @@ class Screen:
                        list(free), float(chi2), prob)
 
     def predicted_chi2(self, mechanisms, starts: list) -> float:
+        """The lowest of :meth:`predicted_chi2_by_start` (see there)."""
+        return float(min(self.predicted_chi2_by_start(mechanisms, starts), default=np.inf))
+
+    def predicted_chi2_by_start(self, mechanisms, starts: list) -> list:
         """χ² after fitting the base model plus ``mechanisms``, predicted without fitting: from
         each start one Gauss-Newton update on the cells' sufficient statistics (JᵀJ, Jᵀr, rᵀr:
         one evaluation of the normal equations), positive parameters held at ≥ 0 by an active
@@ -204,12 +208,13 @@ class Screen:
         (a characteristic speed, a time constant) the update is also taken with the candidate's
         own parameters held at each start, which is its χ² there, the rest refitted: a profile
         over the starts.  It ranks, it does not measure: the candidates it ranks highest are
-        then fitted (:meth:`fit_best_start`)."""
-        best = np.inf
+        then fitted (:meth:`fit_best_start`) → one χ² per start (∞ where nothing is free)."""
+        out = []
         added = {k for m in mechanisms[-1:] for k in m.parameters}
         for initial in starts:
             start, free, held, _ = self._parameters(mechanisms, initial)
             if not free:
+                out.append(np.inf)
                 continue
             prob = self._problem(mechanisms, free, held)
             values = as_arrays({k: start[k] for k in free})
@@ -217,9 +222,9 @@ class Screen:
             x0 = np.array([start[k] for k in free], dtype=float)
             positive = np.array([bool(model.parameter_info(k, mechanisms).positive) for k in free])
             own = np.array([k in added for k in free])
-            best = min(best, gauss_newton_chi2(JtJ, Jtr, float(rr), x0, positive),
-                       gauss_newton_chi2(JtJ, Jtr, float(rr), x0, positive, hold=own))
-        return float(best)
+            out.append(min(gauss_newton_chi2(JtJ, Jtr, float(rr), x0, positive),
+                           gauss_newton_chi2(JtJ, Jtr, float(rr), x0, positive, hold=own)))
+        return out
 
     @staticmethod
     def _chi2(prob, values) -> float:

@@ -254,9 +254,16 @@ def fit_least_squares(data, spec, mechanisms: Sequence = (), options: FitOptions
     if opt.solve not in ("levenberg-marquardt", "gauss-newton") or (opt.solve == "gauss-newton" and rounds):
         raise ValueError(f"FitOptions(solve={opt.solve!r}): 'levenberg-marquardt', or 'gauss-newton' with "
                          "fixed_noise and fixed_inliers")
-    for round_ in range(rounds):
+    first_round = 0
+    if opt.start_residuals is not None and rounds and opt.fixed_noise is None and opt.fixed_inliers is None:
+        # the first round's work done by an earlier fit: its robust noise estimate and outlier test
+        res0 = {c: np.asarray(opt.start_residuals[c], dtype=float) for c in obs}
+        noise.update(obs, res0, run_of, free, opt, first=True)
+        first_round = 1
+    for round_ in range(first_round, rounds):
         problem.set_cells(noise.inliers, noise.runs, noise.breakaway)
-        values, steps, converged, free, reasons = solve(problem, values, free, reasons, opt, first=(round_ == 0))
+        values, steps, converged, free, reasons = solve(problem, values, free, reasons, opt,
+                                                        first=(round_ == first_round))
         steps_total += steps
         pred = problem.predictions(values)
         stable = noise.update(obs, {c: obs[c] - pred[c] for c in obs}, run_of, free, opt, first=round_ == 0)

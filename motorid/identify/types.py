@@ -267,6 +267,11 @@ class FitOptions:
     # Gauss-Newton steps from ``initial`` that lower χ², a polish of a model fitted elsewhere
     # (diagnose's screening cells) on every sample
     solve: str = "levenberg-marquardt"
+    # residuals (channel → per sample, every sample) of a fit of the same model to the same data
+    # near its optimum (diagnose's last finalist, its noise held at the base fit's): the noise
+    # rounds start from them, as from the first round's, so that round (its Gauss-Newton start
+    # and its solve) is not redone
+    start_residuals: dict | None = None
 
 
 @dataclass
