@@ -61,6 +61,7 @@ class Candidate:
 @dataclass
 class Diagnosis:
     mismatch: bool
+    # where diagnose fitted it, its problem (cells, padded samples) is let go once a mechanism is named
     base: FitResult
     final: FitResult
     accepted: list  # [Candidate]
@@ -350,6 +351,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
 
     refused: list = []
     catalog = list(mechanisms) if mechanisms is not None else all_mechanisms()
+    own_base = base is None  # fitted here: what of it the report does not need may be let go
     base = base or fit_least_squares(dataset, spec)
     lap("base fit")
     noise, inliers = _fixed(base)
@@ -510,6 +512,8 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     screen = current_cells = reference = polished = current = scored = None
     for c in accepted:
         c.fit = c.cells = None
+    if accepted and own_base:  # the base fit's cells and padded samples: its numbers stay, for the report
+        base.problem = None
     trim_heap()
     final = (fit_least_squares(dataset, spec, current_mechs, FitOptions(start_residuals=start_residuals),
                                initial=start) if accepted else base)
