@@ -199,8 +199,8 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
     Gauss-Newton update on the cells predicts (:meth:`Screen.predicted_chi2`: one evaluation
     of the normal equations per start, no fit); the best ranked (:data:`SCREEN_FIT_AT_LEAST`,
     and any within :data:`SCREEN_FIT_SHARE` of the best) then fitted on the cells from the
-    :data:`SCREEN_STARTS` starts the update ranks best → [Candidate] (fit: the CellFit, None where only predicted), fitted ones first, each
-    group best first."""
+    :data:`SCREEN_STARTS` starts the update ranks best → [Candidate] (fit: the CellFit, None where
+    only predicted), fitted ones first, each group best first."""
     from motorid.progress import bar
 
     todo = [m for m in catalog
@@ -517,7 +517,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     trim_heap()
     final = (fit_least_squares(dataset, spec, current_mechs, FitOptions(start_residuals=start_residuals),
                                initial=start) if accepted else base)
-    start_residuals = None
+    start_residuals = None  # the finalist's residuals, no longer needed: not held through what follows
     if ripple_gain_only(accepted, dataset):
         widen_for_the_ripple_model(final)
     lap("final fit")
