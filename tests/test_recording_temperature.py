@@ -228,3 +228,27 @@ def test_leaving_out_each_recording_through_one_model_equals_fresh_fits(tmp_path
         b = MotoridModel(spec, [mech]).fit_split(table, train).predict(table.subset(~train))
         for c in ("torque", "q_case"):
             np.testing.assert_allclose(a[c], b[c], rtol=1e-9, err_msg=f"{label} {c}")
+
+
+def test_a_fold_predicted_from_its_fits_own_program_equals_the_model_evaluated_at_the_points(tmp_path):
+    """The held-out comparison takes a fold's predictions from its fit's own program at every point of
+    the table (the others weigh 0 there) instead of evaluating the model again on the held-out points:
+    the two are the same model, the recordings' viscosities bound for the training points included."""
+    from motorid.comparators.evaluate import MotoridModel, _predict_split
+    from motorid.io.tables import read_table
+    from motorid.physics.recording_temperature import RecordingTemperature
+    from motorid.physics.registry import get
+
+    path, spec = _write_map(tmp_path, [d[1] for d in DAYS])
+    table = read_table(path, spec)
+    rec = table.recordings()
+    model = MotoridModel(spec, [RecordingTemperature.for_table(table), get("hydrodynamic_torque")])
+    for label in ("day1", "day2"):
+        train = rec != label
+        fitted = model.fit_split(table, train)
+        fast = _predict_split(model, table, train, ~train)
+        slow = fitted.predict(table.subset(~train))  # the model evaluated at the held-out points alone
+        for c in ("torque", "q_a", "q_b", "q_case"):
+            assert np.isfinite(fast[c]).all(), c
+            np.testing.assert_allclose(fast[c], slow[c], rtol=1e-10, atol=1e-12 * np.max(np.abs(slow[c])),
+                                       err_msg=f"{label} {c}")

@@ -77,7 +77,7 @@ def test_tables_of_one_size_class_run_one_compiled_residual(tmp_path):
     another motor's numbers, lower to the same program, and each fit gets its own answer."""
     import dataclasses
 
-    from motorid.identify.tables import _Residual
+    from motorid.identify.table_residual import TableResidual
 
     from motorid.io.tables import read_table
 
@@ -89,7 +89,7 @@ def test_tables_of_one_size_class_run_one_compiled_residual(tmp_path):
         names = ["Kv", "KF", "TFc", "KL0", "KAB", "KFS", "Ks", "KL_a1", "KL_b1"]
         free = ["Kv", "KF", "TFc", "KL0", "KAB"]
         held = {"KFS": 1e-2, "Ks": 1.0 + len(grid), "KL_a1": 0.0, "KL_b1": 0.0}
-        prob = _Residual(spec, table, names, free, held, [5e3, 2e-3, 1.0, 4e-14, 2e-14], ())
+        prob = TableResidual(spec, table, names, free, held, [5e3, 2e-3, 1.0, 4e-14, 2e-14], ())
         w = {c: np.ones(len(table)) for c in ("torque", "q_a", "q_b", "q_case")}
         return prob, w
 
@@ -98,7 +98,7 @@ def test_tables_of_one_size_class_run_one_compiled_residual(tmp_path):
     b, wb = problem(other, map_grid([100, 600, 1500, 2500], [30, 120, 250], 4), {**TRUTH, "Kv": 7000.0}, "b.csv")
     assert a.n == 36 and b.n == 48 and len(a._pad(wa)["torque"]) == len(b._pad(wb)["torque"]) == 64
     x = np.ones(5)
-    text = [p._residual.lower(x, p._pad(w), {}, p._data, p._held, p.spec).as_text() for p, w in ((a, wa), (b, wb))]
+    text = [p._evaluate.lower(x, p._pad(w), {}, p._data, p._held, p.spec).as_text() for p, w in ((a, wa), (b, wb))]
     assert text[0] == text[1]
     ra, rb = np.asarray(a.residual(x, wa, {})), np.asarray(b.residual(x, wb, {}))
     assert ra.shape == rb.shape and not np.allclose(ra, rb)
@@ -133,3 +133,28 @@ def test_the_probe_looks_where_a_theta_term_is_largest(tmp_path):
     lag = registry.get("sensor_lag_q_a")
     assert angle_samples(SPEC, table, (lag,), {**TRUTH, "sensor_lag_q_a.tau": 5e-3}, ()).theta.shape[1] > 1
     assert angle_samples(SPEC, table, (lag,), {**TRUTH, "sensor_lag_q_a.tau": 0.0}, ()).theta.shape[1] == 1
+
+
+def test_each_mechanism_declared_angle_free_is_so_by_the_probe(tmp_path):
+    """A mechanism declared ``angle_free`` is left out of the θ-probe (its θ only through the 1992
+    model's S(θ) and K_L(θ)): the probe itself, with the mechanism in the model, its parameters
+    nonzero and free, must find the model θ-free where the base model is; and with the base's
+    K_L(θ) harmonics nonzero the declared mechanism does not hide them."""
+    from motorid.identify import table_model
+
+    table = _table(tmp_path)
+    base_free = ("Kv", "KF", "TFc", "KL0", "KAB")
+    declared, probed = [], []
+    for mech in registry.all_mechanisms():
+        values = {k: (info.typical or 0.1) for k, info in mech.parameters.items()}
+        p = {**TRUTH, **values}
+        varies = table_model._probe_angle(SPEC, table, bind_mechanisms((mech,), table), p,
+                                          base_free + tuple(values), 1e-9)
+        (declared if mech.angle_free else probed).append(mech.id)
+        assert not (mech.angle_free and varies), mech.id
+        if mech.angle_free:
+            # the base's harmonics still make the table's points vary, the mechanism declared or not
+            assert angle_samples(SPEC, table, (mech,), {**p, "KL_a1": 0.2}, base_free).theta.shape[1] > 1, mech.id
+    # the shaft-order terms are probed: the ripple and a lagged transducer's ripple
+    assert {"misalignment_ripple", "sensor_lag_torque", "sensor_lag_q_a"} <= set(probed)
+    assert len(declared) >= 20

@@ -62,6 +62,8 @@ def rms_errors(measured: dict, predicted: dict, span_from: dict) -> dict:
 def _predict_split(model, table, train, test) -> dict:
     if hasattr(model, "fit_split"):  # one compiled problem for every fold
         fitted = model.fit_split(table, train)
+        if isinstance(fitted, _FittedMotorid):  # its fit holds the model at every point of the table
+            return {c: v[test] for c, v in fitted.predict(table).items()}
     else:
         fitted = model.fit(table.subset(train))
     return fitted.predict(table.subset(test))
@@ -148,15 +150,21 @@ class _FittedMotorid:
         from motorid.identify.tables import angle_samples, bind_mechanisms, point_channels
 
         o = self.owner
+        if table is self.fit.table:
+            # the table it was fitted on (a fold's other points weigh 0 there): the θ-averaged model at
+            # every point, as the fit's own program gave it (the same model, evaluated once)
+            return self._identified({c: np.array(self.fit.table_prediction[c], dtype=float) for c in CHANNELS},
+                                    len(table))
         p = self.fit.ls.params_all
         disp = table.displacement if table.variable_displacement else None
         # the mechanisms as the fit used them (set for its training points), looked up at these points
         mechanisms = bind_mechanisms(self.fit.ls.mechanisms, table)
         ch = point_channels(p, o.spec, angle_samples(o.spec, table, mechanisms, p), disp, mechanisms)
-        out = dict(zip(CHANNELS, (np.asarray(v) for v in ch)))
-        ls = self.fit.ls
-        for c in not_predicted(ls.identifiable):
-            out[c] = np.full(len(table), np.nan)
+        return self._identified(dict(zip(CHANNELS, (np.asarray(v) for v in ch))), len(table))
+
+    def _identified(self, out: dict, n: int) -> dict:
+        for c in not_predicted(self.fit.ls.identifiable):
+            out[c] = np.full(n, np.nan)
         return out
 
 

@@ -306,7 +306,9 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             if mech in current:
                 continue
             try:
-                tf = fit_table(table, spec, current + [mech], **joint)
+                # from the current model's fit: its mechanisms start where they were fitted (a knee's
+                # data starts are tried for the new candidate alone)
+                tf = fit_table(table, spec, current + [mech], start_values=best_fit.ls.params_all, **joint)
             except Exception as exc:  # a mechanism whose hooks do not take θ-averaged table samples
                 steps.append({"id": mech.id, "skipped": f"{type(exc).__name__}: {exc}"[:200]})
                 continue

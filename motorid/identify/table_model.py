@@ -89,7 +89,16 @@ def _varies_with_angle(spec, table, mechanisms, params, free, rtol: float = 1e-9
     The answer depends on the model's structure, not on the values: the spec, the mechanisms, the
     parameters set free, which parameters are nonzero, and whether the table has speed and each
     pressure difference at all.  It is kept under that key (the spec and mechanisms themselves held,
-    so that their ids stay theirs), and probed once per key."""
+    so that their ids stay theirs), and probed once per key.  Mechanisms declared ``angle_free``
+    (physics/base.py: θ only through the 1992 model's S(θ) and K_L(θ)) vary with θ where the base
+    model does and only there: they are left out of the probe and of its key, so that a diagnosis
+    probes the base model once instead of once for every candidate (tests/test_table_angles.py checks
+    each declaration against the probe)."""
+    declared = {k for m in mechanisms if getattr(m, "angle_free", False) for k in m.parameters}
+    mechanisms = tuple(m for m in mechanisms if not getattr(m, "angle_free", False))
+    free = tuple(k for k in free if k not in declared)
+    params = {k: v for k, v in params.items() if k not in declared}
+
     def nonzero(v) -> bool:
         a = np.asarray(v, dtype=float)
         return bool(np.any(a != 0) or np.any(~np.isfinite(a)))

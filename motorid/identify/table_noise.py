@@ -58,22 +58,50 @@ def noise_floor_and_scale(residuals, relative, dof_factor: float = 1.0, start: f
     """(σ_floor, s) [unit of the residuals] maximizing the Gaussian likelihood of ``residuals``
     with σ_i² = σ_floor² + (s · relative_i)²; ``dof_factor`` (n/dof ≥ 1) inflates the squared
     residuals for the parameters fitted.  A floor below 10⁻⁶ of s is returned as 0."""
-    from scipy.optimize import minimize
-
     r2 = np.asarray(residuals, float) ** 2 * dof_factor
     q2 = np.asarray(relative, float) ** 2
     s0 = float(np.sqrt(np.mean(r2 / np.maximum(q2, 1e-300)))) if start is None else float(start)
     s0 = max(s0, 1e-300)
+    r2s = r2 / (s0 * s0)
 
     def nll(th):  # th = log(σ_floor / s0), log(s / s0)
         v = np.exp(2 * th[0]) + np.exp(2 * th[1]) * q2
-        return float(np.sum(np.log(v) + r2 / (s0 * s0 * v)))
+        return float(np.sum(np.log(v) + r2s / v))
 
-    # one descent from the best of three starts (floor-led, scale-led, both): the likelihood is smooth in
-    # the two logs, and a descent from each start costs a pass over the points per step
-    x0 = min(([-3.0, 0.0], [0.0, -3.0], [-1.0, -1.0]), key=nll)
-    best = minimize(nll, x0, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 2000})
-    floor, scale = s0 * math.exp(best.x[0]), s0 * math.exp(best.x[1])
+    def derivatives(th):  # its gradient and Hessian in the two logs (a Newton step needs a pass over the points)
+        a, b = np.exp(2 * th[0]), np.exp(2 * th[1]) * q2
+        v = a + b
+        g = 1.0 / v - r2s / v ** 2  # ∂/∂v
+        h = -1.0 / v ** 2 + 2.0 * r2s / v ** 3  # ∂²/∂v²
+        grad = np.array([np.sum(g * 2 * a), np.sum(g * 2 * b)])
+        hess = np.array([[np.sum(h * 4 * a * a + g * 4 * a), np.sum(h * 4 * a * b)],
+                         [np.sum(h * 4 * a * b), np.sum(h * 4 * b * b + g * 4 * b)]])
+        return grad, hess
+
+    # a damped Newton descent from the best of three starts (floor-led, scale-led, both): the likelihood is
+    # smooth in the two logs, and its exact derivatives take it there in a few passes over the points
+    th = np.asarray(min(([-3.0, 0.0], [0.0, -3.0], [-1.0, -1.0]), key=nll), dtype=float)
+    f, damping = nll(th), 1e-3
+    for _ in range(200):
+        grad, hess = derivatives(th)
+        while True:
+            step = np.linalg.solve(hess + damping * (np.abs(np.diag(hess)).max() + 1.0) * np.eye(2), -grad) \
+                if np.all(np.isfinite(hess)) else -grad
+            trial = th + np.clip(step, -2.0, 2.0)  # at most a factor e² in σ_floor or s a step
+            f_trial = nll(trial)
+            if np.isfinite(f_trial) and f_trial <= f:
+                break
+            damping *= 10.0
+            if damping > 1e12:
+                break
+        if not (np.isfinite(f_trial) and f_trial <= f):
+            break
+        # settled: the likelihood no longer falls (a floor or scale sliding to 0 changes it by nothing)
+        done = f - f_trial <= 1e-10 * max(abs(f), 1.0)
+        th, f, damping = trial, f_trial, max(damping / 10.0, 1e-9)
+        if done:
+            break
+    floor, scale = s0 * math.exp(th[0]), s0 * math.exp(th[1])
     return (0.0 if floor < 1e-6 * scale else floor), scale
 
 

@@ -31,8 +31,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Sequence
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from motorid import _jaxconfig  # noqa: F401
@@ -46,10 +44,9 @@ from motorid.identify.lack_of_fit import model_error_warnings, structured_error
 from motorid.identify.table_noise import ChannelNoise, channel_noise, initial_sigma
 from motorid.identify.table_model import (THETA_POINTS, angle_points, angle_samples,  # noqa: F401
                                           bind_mechanisms, point_channels, table_samples)
+from motorid.identify.table_residual import TABLE_CHANNELS, TableResidual
 from motorid.errors import InputError
 from motorid.identify.types import FitResult
-
-TABLE_CHANNELS = ("torque", "q_a", "q_b", "q_case")
 NO_BREAKAWAY = ("an operating-point table holds running points only, no breakaway: static friction needs "
                 "startability runs (ISO 4392-2)")
 NO_ANGLE = ("an operating-point table holds means over shaft angle: the K_L(θ) harmonics need flows "
@@ -134,123 +131,6 @@ class TableFit:
     table_reading_share: dict = field(default_factory=dict)  # channel → σ's share of the reading (table_noise.py)
 
 
-def _padded(table):
-    """``table`` with its last point repeated up to a power of two (at least 16) points: the
-    compiled residual then serves every table of that size class (the extra points get weight 0)."""
-    n = len(table)
-    if n == 0:
-        return table
-    size = max(16, 1 << max(n - 1, 1).bit_length())
-    return table if size == n else table.subset(np.concatenate([np.arange(n), np.full(size - n, n - 1)]))
-
-
-class _Residual:
-    """The weighted residual of tables (and logs) as a function of the scaled free parameters.
-
-    One compiled function per set of free parameters; the weights are arguments, so that
-    refits on other folds or with other noise levels reuse it.  So are the table's points (padded
-    to a power of two with points of weight 0), the held values and the spec's numbers: the
-    program is not this table's, and any table of the same size class, mechanisms and free
-    parameters runs it (from the disk cache in a later process)."""
-
-    def __init__(self, spec, table, names, free, held, scales, mechanisms, dataset=None):
-        self.spec, self.free = spec, list(free)
-        self.hold(held)
-        self.n = len(table) if table is not None else 0
-        padded = _padded(table) if table is not None else None
-        self.mechanisms = bind_mechanisms(mechanisms, padded) if table is not None else tuple(mechanisms)
-        self.scales = np.asarray(scales, dtype=float)
-        probe = {**held, **{k: float(v) for k, v in zip(free, scales)}}
-        # probed on the table's own points (not the padding's repeats), evaluated on the padded table
-        self.samples = table_samples(spec, padded, angle_points(spec, table, mechanisms, probe, free)) \
-            if table is not None else None
-        disp = None
-        if table is not None and table.variable_displacement:
-            disp = np.asarray(padded.displacement, dtype=float)
-        self.disp = disp
-        self.obs = {c: np.nan_to_num(np.asarray(padded.measured[c], dtype=float)) for c in TABLE_CHANNELS} \
-            if table is not None else {}
-        self.dataset = dataset
-        self.log_obs = {}
-        if dataset is not None:
-            if dataset.n_running:
-                self.log_obs.update({c: np.nan_to_num(np.asarray(dataset.measured[c], dtype=float))
-                                     for c in TABLE_CHANNELS})
-            if dataset.n_events:
-                self.log_obs["breakaway"] = np.nan_to_num(np.asarray(dataset.held_torque, dtype=float))
-        mechs = self.mechanisms
-        scales_j = jnp.asarray(self.scales)
-
-        def params(x, held_values):
-            p = dict(held_values)
-            for i, k in enumerate(self.free):
-                p[k] = x[i] * scales_j[i]
-            return p
-
-        def table_pred(x, data, held_values, spec_):
-            samples, _, disp_ = data
-            ch = point_channels(params(x, held_values), spec_, samples, disp_, mechs)
-            return dict(zip(TABLE_CHANNELS, ch))
-
-        def log_pred(x, held_values, spec_):
-            out = {}
-            p = params(x, held_values)
-            if dataset is not None and dataset.n_running:
-                ch = model.predict(p, spec_, dataset.running, mechs)
-                out.update(zip(TABLE_CHANNELS, ch))
-            if dataset is not None and dataset.n_events:
-                out["breakaway"] = model.predict_breakaway(p, spec_, dataset.events, mechs)
-            return out
-
-        def residual(x, w_table, w_logs, data, held_values, spec_):
-            parts = []
-            if table is not None:
-                pred = table_pred(x, data, held_values, spec_)
-                parts += [(data[1][c] - pred[c]) * w_table[c] for c in TABLE_CHANNELS]
-            if self.log_obs:
-                pred = log_pred(x, held_values, spec_)
-                parts += [(self.log_obs[c] - pred[c]) * w_logs[c] for c in self.log_obs]
-            return jnp.concatenate(parts)
-
-        self._data = (self.samples, self.obs, self.disp)
-        self._log_pred = jax.jit(log_pred)
-        self._table_pred = jax.jit(table_pred) if table is not None else None
-        self._residual = jax.jit(residual)
-        self._jacobian = jax.jit(jax.jacfwd(residual))
-
-    def hold(self, held: dict):
-        """Hold these values (SI; the same names on a refit) from now on: inputs of the programs."""
-        self.held = dict(held)
-        self._held = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in self.held.items()}
-
-    def _pad(self, w_table):
-        extra = len(self.obs["torque"]) - self.n if self.obs else 0
-        return {c: np.concatenate([np.asarray(w, dtype=float), np.zeros(extra)]) for c, w in w_table.items()}
-
-    def log_pred(self, x):
-        return self._log_pred(x, self._held, self.spec)
-
-    def table_pred(self, x):
-        """The θ-averaged model at the table's points (its own n, the padding cut off)."""
-        return {c: v[: self.n] for c, v in self._table_pred(x, self._data, self._held, self.spec).items()}
-
-    def residual(self, x, w_table, w_logs):
-        return self._residual(x, self._pad(w_table), w_logs, self._data, self._held, self.spec)
-
-    def jacobian(self, x, w_table, w_logs):
-        return self._jacobian(x, self._pad(w_table), w_logs, self._data, self._held, self.spec)
-
-    def solve(self, x0, w_table, w_logs, lower):
-        from scipy.optimize import least_squares
-
-        fun = lambda x: np.asarray(self.residual(x, w_table, w_logs))  # noqa: E731
-        jac = lambda x: np.asarray(self.jacobian(x, w_table, w_logs))  # noqa: E731
-        x0 = np.maximum(np.asarray(x0, dtype=float), lower + 1e-12)
-        sol = least_squares(fun, x0, jac=jac, bounds=(lower, np.inf), method="trf", x_scale="jac",
-                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200)
-        return sol.x, int(sol.nfev), bool(sol.success), jac(sol.x)
-
-
 def _linear_start(spec, table, names, mechanisms) -> dict:
     """Starting values from the θ-averaged base model, which is linear in K_v, K_F, T_Fc
     (torque) and K_L0, K_AB (flows): a least-squares solve of each part on the table."""
@@ -320,7 +200,7 @@ def _table_files(table) -> str:
 
 def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: FitResult | None = None,
               harmonics: int | None = None, train=None, rounds: int = 3, fixed_noise: dict | None = None,
-              _cache: dict | None = None) -> TableFit:
+              start_values: dict | None = None, _cache: dict | None = None) -> TableFit:
     """Fit the model (plus ``mechanisms``) to operating-point tables, alone or with logs.
 
     table : :class:`motorid.io.tables.PointTable` (None: logs only is not this function's job)
@@ -329,6 +209,9 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         least-squares fit (its per-sample noise and inliers weight the logs in the joint fit)
     train : bool mask over the table points to fit on (the rest get weight 0: K-fold refits)
     fixed_noise : channel → s_c to hold instead of estimating it (a refit on a fold)
+    start_values : parameter → value (SI) of a fit of a model that these mechanisms extend (a
+        diagnosis's current model): the start of the parameters it holds; a mechanism whose
+        parameters it all holds starts there instead of from its data starts (a knee's quantiles)
     Returns a :class:`TableFit`.
     """
     t0 = time.time()
@@ -349,6 +232,9 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     start = _linear_start(spec, table.subset(train), names, mechanisms)
     if log_fit is not None:
         start.update({k: v for k, v in log_fit.params_all.items() if v is not None and k in names})
+    given = {k: float(v) for k, v in (start_values or {}).items()
+             if k in names and v is not None and np.isfinite(float(v))}
+    start.update(given)
     free = [k for k in names if k not in reasons]
     has = {c: np.isfinite(table.measured[c]) & train for c in TABLE_CHANNELS}
     whole = bool(np.all(train))  # not a fold's training points (a fold too small is the comparison's to say)
@@ -377,7 +263,7 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         held = {k: float(start.get(k, 0.0) or 0.0) for k in names if k not in free_now}
         if key not in cache:
             scales = [abs(model.parameter_info(k, mechanisms).typical) or 1.0 for k in free_now]
-            cache[key] = _Residual(spec, table, names, free_now, held, scales, mechanisms, dataset)
+            cache[key] = TableResidual(spec, table, names, free_now, held, scales, mechanisms, dataset)
         else:  # a refit on another fold: its own start values for what it holds (inputs of the program)
             cache[key].hold(held)
         return cache[key]
@@ -392,7 +278,8 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
         return {c: np.where(has[c], 1.0 / point_sigma(c), 0.0) for c in TABLE_CHANNELS}
 
     values = {k: float(start[k]) for k in free}
-    values = _best_data_start(problem, free, values, mechanisms, table, train, weights(), w_logs)
+    searched = [m for m in mechanisms if not (m.parameters and all(k in given for k in m.parameters))]
+    values = _best_data_start(problem, free, values, searched, table, train, weights(), w_logs)
     for round_ in range(max(rounds, 1) + 1):
         prob = problem(free)
         lower = np.array([0.0 if model.parameter_info(k, mechanisms).positive else -np.inf for k in free])

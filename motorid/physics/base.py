@@ -101,6 +101,11 @@ class Mechanism:
     reference: str = ""  # literature reference
     channels: tuple[str, ...] = ()  # of: torque, q_a, q_b, q_case, breakaway
     parameters: dict[str, ParameterInfo] = {}
+    #: True where the mechanism's terms depend on the shaft angle θ only through the 1992 model's
+    #: S(θ) and K_L(θ) harmonics (in value and in every derivative): a table's θ-average then needs
+    #: one angle whenever the base model does (identify/table_model.py), without probing it.  False
+    #: (the default, for a mechanism not declared so): its θ-dependence is probed numerically.
+    angle_free: bool = False
 
     def running(self, params: dict, spec, samples: Samples, ch: Channels) -> Channels:
         """Add this mechanism's terms to the running channels."""

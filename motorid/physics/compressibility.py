@@ -22,6 +22,8 @@ class CompressibilityFlow(CatalogMechanism):
     bulk modulus β; |ω| is smoothed within 0.01 rpm of zero (:func:`smooth_abs`).
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "compressibility_flow"
     name = "compressibility (dead-volume) flow loss"
     physics = ("Each cylinder carries a dead volume of oil that is compressed from the low to the high port "

@@ -53,6 +53,8 @@ class FilmHeating(CatalogMechanism):
     D [m³/rev], μ [Pa·s] the oil's viscosity, ω [rad/s].  Zero at c_N = 0 (the 1992 law).
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "film_heating"
     name = "viscous heating of the films (viscous loss growing less than ω)"
     physics = ("The oil films of the pistons, valve plate and joints are sheared fast across a few micrometres "

@@ -42,6 +42,8 @@ class StribeckFriction(CatalogMechanism):
     limit: at ω = 0 the shaft is held by static friction (MODEL.md).
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "stribeck_friction"
     name = "Stribeck friction"
     physics = ("At low sliding speed the oil films in the bearings, piston and seal contacts thin out, so "
@@ -96,6 +98,8 @@ class CasePressureFriction(CatalogMechanism):
     friction with no static excess of its own it adds the same amount to the
     breakaway limit.
     """
+
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
 
     id = "case_pressure_friction"
     name = "case-pressure seal friction"

@@ -17,6 +17,8 @@ class HydrodynamicTorque(CatalogMechanism):
     T_h = −C_h ω |ω|,  C_h [N·m·s²], independent of viscosity.
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "hydrodynamic_torque"
     name = "hydrodynamic (churning) torque loss"
     physics = ("The rotating cylinder block and pistons churn the oil that fills the case, and the drag of this "

@@ -24,6 +24,8 @@ class TurbulentLeakage(CatalogMechanism):
     C_t = C_d A √(2/ρ) [m³/(s·√Pa)], independent of viscosity.
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "turbulent_leakage"
     name = "turbulent (orifice) leakage"
     physics = ("Leakage through short, wide passages such as valve-plate edges or worn clearances behaves like "
@@ -65,6 +67,8 @@ class GapDeformation(CatalogMechanism):
     balance holds; at small c|Δp| the leak grows by 3c|Δp| above proportional.  c [1/Pa] is
     the gap's relative opening per pascal: 1e-9 opens it 2.5 % at 250 bar (leak +8 %).
     """
+
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
 
     id = "gap_deformation"
     name = "leakage gaps opening under pressure (elastic deformation)"

@@ -74,6 +74,8 @@ class MixedLubricationFriction(CatalogMechanism):
     torque and its gradient are finite at ω = 0 and ΔP = 0 (where T_ml = 0).
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "mixed_lubrication"
     name = "mixed-lubrication friction (Stribeck curve in μω/ΔP)"
     physics = ("The pistons, ball joints and valve plate carry the pressure load on oil films whose thickness "
@@ -147,6 +149,8 @@ class PressureSpeedTorque(CatalogMechanism):
     same shape times μ; on a campaign whose fast runs are all at one oil
     temperature the two are one, and this term stands for both.
     """
+
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
 
     id = "pressure_speed_loss"
     name = "pressure × speed torque loss (ΔP·ω cross term)"

@@ -75,6 +75,8 @@ class PumpModeFriction(CatalogMechanism):
     other patterns.
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "pump_mode_friction"
     name = "pump-mode friction (loss law differing between pump and motor mode)"
     physics = ("In motor mode the pistons drive the shaft; in pump mode the shaft drives the pistons against the "

@@ -58,6 +58,8 @@ class RecordingTemperature(Mechanism):
     """Viscosity per recording, μ_r = μ(T_assumed)·exp(s_r), Σ s_r = 0, Eq. (1); s_r [-] a
     parameter of every recording but the reference (most points), whose s is −Σ of the others."""
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "recording_temperature"
     name = "oil temperature not recorded, different from recording to recording"
     physics = ("The table takes every point at the spec's assumed oil temperature, but its recordings were made "

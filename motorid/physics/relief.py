@@ -61,6 +61,8 @@ class ReliefValve(CatalogMechanism):
     (a one-way relief) looks the same where only that direction reaches P_r.
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "relief_valve"
     name = "cross-port relief valve (bypass flow above a cracking pressure)"
     physics = ("A relief valve across the two lines opens once the pressure difference passes its setting and "

@@ -59,6 +59,8 @@ class TorqueOffset(CatalogMechanism):
     sign does not follow the direction of rotation.
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     sensor = True  # changes a reading, not the motor: exports leave it out
     id = "torque_offset"
     name = "torque transducer zero offset"
@@ -153,6 +155,8 @@ def lagged_leakage_change(theta, speed, tau, params, pistons: int):
 
 class _LinearReading(CatalogMechanism):
     """A transducer error on one channel, linear in its one parameter (a gain, a zero)."""
+
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
 
     sensor = True  # changes a reading, not the motor: exports leave it out
 

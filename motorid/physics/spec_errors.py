@@ -52,6 +52,8 @@ class DisplacementError(CatalogMechanism):
     ΔQ_AN = ε·D ω S(θ)/2n, ΔQ_BN = −ΔQ_AN, ΔQ_CN = 0 (Bartos 1992 Eq. 7, 36-37).
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     single_start = True  # linear in ε: one start of the fit is enough
     id = "displacement_error"
     name = "displacement differs from the spec"
@@ -125,6 +127,8 @@ class LeakPhase(CatalogMechanism):
     ΔQ_BN = ΔQ_CN = [K_L(θ − φ − δφ) − K_L(θ − φ)] (P_B − P_c)/μ (Eq. 53-55).
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "leak_phase"
     name = "leakage phase differs from the spec"
     physics = ("The port-to-case leakage repeats every piston pitch, and port B's pattern is port A's shifted by a "
@@ -166,6 +170,8 @@ class InertiaError(CatalogMechanism):
     ΔT = −ΔJ·α in the running torque (Bartos 1992 Eq. 17); the held torque at
     breakaway (α = 0 at the instant the shaft moves) is untouched.
     """
+
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
 
     single_start = True  # linear in ΔJ: one start of the fit is enough
     id = "inertia_error"

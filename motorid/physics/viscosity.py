@@ -36,6 +36,8 @@ class PressureViscosity(CatalogMechanism):
     port-to-case leakage at 250 bar).
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "pressure_viscosity"
     name = "pressure-viscosity (Barus) effect on leakage"
     physics = ("Oil viscosity rises exponentially with pressure (the Barus law), so the oil in a leakage gap is "

@@ -43,6 +43,8 @@ class FillingLoss(CatalogMechanism):
     constant back pressure would not resolve.
     """
 
+    angle_free = True  # θ only through the 1992 model's S(θ) and K_L(θ) (physics/base.py)
+
     id = "filling_loss"
     name = "incomplete-filling flow loss (∝ ω²)"
     physics = ("At high speed the cylinders are open to their filling port for a short time, and the oil has to be "
