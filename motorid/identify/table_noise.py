@@ -65,8 +65,7 @@ def noise_floor_and_scale(residuals, relative, dof_factor: float = 1.0, start: f
     r2s = r2 / (s0 * s0)
 
     def nll(th):  # th = log(σ_floor / s0), log(s / s0)
-        v = np.exp(2 * th[0]) + np.exp(2 * th[1]) * q2
-        return float(np.sum(np.log(v) + r2s / v))
+        return _neg2_log_likelihood(r2s, np.exp(2 * th[0]) + np.exp(2 * th[1]) * q2)
 
     def derivatives(th):  # its gradient and Hessian in the two logs (a Newton step needs a pass over the points)
         a, b = np.exp(2 * th[0]), np.exp(2 * th[1]) * q2

@@ -33,7 +33,8 @@ def _padded(table):
 class TableResidual:
     """The weighted residual of tables (and logs) as a function of the scaled free parameters.
 
-    One compiled function per set of free parameters; the weights are arguments, so that
+    One compiled program per set of free parameters (residual, Jacobian and predictions together,
+    :meth:`evaluate`); the weights are arguments, so that
     refits on other folds or with other noise levels reuse it.  So are the table's points (padded
     to a power of two with points of weight 0), the held values and the spec's numbers: the
     program is not this table's, and any table of the same size class, mechanisms and free
