@@ -196,7 +196,8 @@ def run(quick: bool = False) -> str:
         lines += ["", f"(Loss-map section skipped: {exc}.)"]
     lines += ["", "Reading: `right` names exactly the mechanism; `unexplained only` names none and leaves the "
                   "structure unexplained (what diagnose does when two mechanisms explain the data alike, the "
-                  "ΔBIC tie rule of motorid/discrepancy/select.py); `wrong` would name another one.",
+                  "tie rules of motorid/discrepancy/tie.py: Δχ² and ΔBIC, and the run-level test); `wrong` would name "
+                  "another one.",
               "", f"Study time {time.time() - t0:.0f} s."]
     return "\n".join(lines)
 

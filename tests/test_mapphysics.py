@@ -19,7 +19,8 @@ from motorid.bench.protocols import parse_protocol
 from motorid.bench.simulate import simulate_campaign
 from motorid.bench.truth import Truth
 from motorid.physics import registry as catalog
-from motorid.discrepancy.select import _tied, diagnose, diagnosis_document
+from motorid.discrepancy.select import diagnose, diagnosis_document
+from motorid.discrepancy.tie import tied as _tied
 from motorid.errors import InputError
 from motorid.identify.pipeline import load_campaign
 from motorid.physics.torque import pressure_torque

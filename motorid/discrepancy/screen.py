@@ -274,6 +274,17 @@ class Screen:
         cap = 25.0 * np.concatenate([np.maximum(self.counts[c], 1.0) for c in order])
         return float(np.sum(np.minimum(np.where(np.isfinite(r), r * r, 0.0), cap)))
 
+    def chi2_by_run(self, fit: CellFit) -> np.ndarray:
+        """χ² of ``fit`` on every cell, summed per run (events with their run) → [runs]."""
+        obs, w = self.template.cells
+        order = [c for c in CHANNELS if c in obs]
+        prob = self._problem(fit.mechanisms, fit.free, {k: v for k, v in fit.values.items() if k not in fit.free})
+        r = np.asarray(residual_jit(as_arrays({k: fit.values[k] for k in fit.free}), prob.ctx()))
+        runs = np.concatenate([self._run[c] for c in order])
+        ok = (runs >= 0) & np.isfinite(r)
+        n_runs = len(self.dataset.runs)
+        return np.bincount(runs[ok], r[ok] ** 2, minlength=n_runs)[:n_runs]
+
     def scatter_of(self, runs) -> float:
         """The χ² the samples of ``runs`` add about their cell means where the noise model holds
         (n − 1 per cell of n samples): what a χ² over the cells lacks against one over samples."""

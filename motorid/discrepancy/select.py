@@ -33,6 +33,7 @@ import numpy as np
 from motorid._aot import cached_jit, trim_heap
 from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT, Location, locate
 from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen, thread_pool
+from motorid.discrepancy.tie import near_tie, run_vuong_z, tied
 from motorid.discrepancy.unexplained import extrapolation_check
 from motorid.discrepancy.verdicts import (LINEARITY_SHARE, caveats, refuse_cancelling_pair, ripple_gain_only,
                                          transducer_like, widen_for_the_ripple_model)
@@ -115,19 +116,6 @@ def _starts(current: dict, mech, dataset=None) -> list:
         dp = np.abs(runs["dp_median_Pa"].to_numpy(dtype=float))[moving]
         out += [{**current, **s} for s in mech.data_starts(dp)]
     return out
-
-
-def _tied(scored: list, min_evidence: float) -> bool:
-    """Whether the two best candidates both earn their place (ΔBIC > ``min_evidence``) and
-    the data do not tell them apart: the first beats the second by less than ``min_evidence``
-    in ΔBIC or in Δχ² (the fit itself — where both fit alike, one parameter fewer must not
-    decide the name).  Mechanisms whose signatures coincide on these data (a Stribeck curve
-    in speed and one in μω/ΔP where all slow runs share one pressure) tie; a wrong name is
-    worse than none, so diagnose then names neither."""
-    if len(scored) < 2 or scored[1].delta_bic <= min_evidence:
-        return False
-    a, b = scored[0], scored[1]
-    return min(a.delta_bic - b.delta_bic, a.delta_chi2 - b.delta_chi2) < min_evidence
 
 
 def _structure_key(s) -> tuple:
@@ -249,13 +237,6 @@ def _screen_candidates(screen, catalog, current_mechs, current, channels, datase
             cached_jit.release(mech)
     fitted.sort(key=lambda c: -c.delta_bic)
     return fitted + ranked
-
-
-def _near_tie(scored: list, min_evidence: float) -> bool:
-    """The two best are close enough that the coarse cells could order them wrongly."""
-    return (len(scored) >= 2 and scored[1].delta_bic > min_evidence
-            and min(scored[0].delta_bic - scored[1].delta_bic, scored[0].delta_chi2 - scored[1].delta_chi2)
-            < 3 * min_evidence)
 
 
 def _refit_in_full(cands: list, dataset, spec, current_mechs, noise, inliers, current_full, n_res) -> None:
@@ -381,7 +362,7 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
         if not scored:
             break
         ref = current
-        if _near_tie(scored, min_evidence):  # the coarse cells must not decide a close call
+        if near_tie(scored, min_evidence):  # the coarse cells must not decide a close call
             if current is base and reference is None:
                 # the base model refitted like the candidates (noise and inliers held, from its
                 # optimum): the reference of their Δχ² on every sample, so that no candidate is
@@ -394,10 +375,13 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
             _refit_in_full(scored[:2], dataset, spec, current_mechs, noise, inliers, ref, n_res)
             scored[:2] = sorted(scored[:2], key=lambda c: -c.delta_bic)
             lap("finalists on every sample")
-        if _tied(scored, min_evidence):  # two names explain it alike: naming one would be a guess
+        if tied(scored, min_evidence, dataset, screen):  # two names explain it alike: naming one would be a guess
             steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
                            "cv_gain": None, "accepted": False, "tied": i < 2} for i, c in enumerate(scored)])
-            say(f"{scored[0].mechanism.id} and {scored[1].mechanism.id} explain it alike; neither is named")
+            z = run_vuong_z(scored[0], scored[1], dataset, screen)  # the runs' own verdict, for the record
+            steps[-1][0]["run_z"] = z
+            by = "" if z is None else f" (the first better by {z:.2g} run-level standard errors)"
+            say(f"{scored[0].mechanism.id} and {scored[1].mechanism.id} explain it alike{by}; neither is named")
             break
         if current_cv is None and folds > 1:
             current_cv = screen.held_out_chi2(current_mechs, current_cells.params_all, fold_runs)
