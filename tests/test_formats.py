@@ -325,6 +325,40 @@ def test_a_square_grid_read_with_its_axes_swapped_is_refused_naming_the_axes(tmp
         read_tables([path], load_motor_spec(MOTOR), channels=tmp_path / "map.toml")
 
 
+def test_a_square_torque_only_grid_read_with_its_axes_swapped_is_refused(tmp_path):
+    """Without a flow to contradict the swept flow, a square torque map read the wrong way round
+    had every ideal-machine ratio in range (the torque's mean slope on the misread ΔP near 1) and
+    was fitted with exit 0: K_F 9× the truth, K_v and T_Fc at zero (a new user's 8 × 8 .mat map of
+    a 250 cm³/rev radial-piston motor).  Read right, the same file passes."""
+    from scipy.io import savemat
+
+    from motorid.io.tables import read_tables
+    from motorid.io.table_checks import MIN_PRESSURE_SHARE, _torque_follows_pressure
+
+    speed = np.linspace(20.0, 300.0, 8)  # rpm: numbers like the pressures' own
+    dp = np.linspace(25.0, 300.0, 8)  # bar
+    D = 80e-6
+    omega = speed * 2 * np.pi / 60
+    loss = 0.006 * D * np.outer(2 * dp * 1e5, np.ones(8)) / (2 * np.pi) + 0.02 * np.outer(np.ones(8), omega) + 2.0
+    torque = D * np.outer(dp * 1e5, np.ones(8)) / (2 * np.pi) - loss  # the maker's rows: ΔP
+    path = tmp_path / "map.mat"
+    savemat(path, {"map": {"n": speed, "dp": dp, "T": torque}})
+    text = GRID_MAP.replace('convention = "pump"\n', "").replace('q_a_lpm = {name = "map.Q", unit = "l/min"}\n', "")
+    (tmp_path / "map.toml").write_text(text)
+    with pytest.raises(InputError, match=r"torque does not follow the pressure torque.*\[grid\] axes in the wrong order"):
+        read_tables([path], load_motor_spec(MOTOR), channels=tmp_path / "map.toml")
+    # the same grid declared the right way round passes
+    (tmp_path / "right.toml").write_text(text.replace('axes = ["speed_rpm", "dp_bar"]', 'axes = ["dp_bar", "speed_rpm"]'))
+    table = read_tables([path], load_motor_spec(MOTOR), channels=tmp_path / "right.toml")
+    assert len(table) == 64
+    # what the check measures: read right the pressure torque explains nearly all, swapped nearly none
+    ideal = D * np.outer(dp * 1e5, np.ones(8)).ravel() / (2 * np.pi)
+    share, n = _torque_follows_pressure(torque.ravel(), ideal, np.outer(np.ones(8), omega).ravel())
+    assert share > 0.99 and n == 64
+    swapped, _ = _torque_follows_pressure(torque.T.ravel(), ideal, np.outer(np.ones(8), omega).ravel())
+    assert swapped < MIN_PRESSURE_SHARE
+
+
 # --------------------------------------------------------------------------- bad files, bad maps
 
 def _cli_fails(args, capsys):

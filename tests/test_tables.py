@@ -380,6 +380,22 @@ def test_fit_and_predict_commands(tmp_path, capsys):
     assert len(pred) == len(pts) and pred["torque_Nm"].notna().all()
     resid = _map()["torque_Nm"] - pred["torque_Nm"]
     assert np.sqrt(np.mean(resid**2)) < 2 * NOISE["torque_Nm"]
+    # predictions are keyed by point_id: an id that names two points is refused in one line, nothing written
+    twice = pts.copy()
+    twice.loc[3, "point_id"] = twice.loc[2, "point_id"]
+    twice_path = _write(twice, tmp_path / "twice.csv")
+    capsys.readouterr()
+    assert main(["predict", str(tmp_path / "fit"), str(twice_path), "--out", str(tmp_path / "q.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert f"twice.csv: column 'point_id': '{twice.loc[2, 'point_id']}' names 2 points" in err
+    assert "line 4" in err and "line 5" in err and not (tmp_path / "q.csv").exists()
+    # a fit takes the repeats as separate points, and says the id repeats
+    full = _map()
+    full.loc[3, "point_id"] = full.loc[2, "point_id"]
+    assert main(["fit", _write(full, tmp_path / "rep.csv").as_posix(), "--motor", str(motor), "--out",
+                 str(tmp_path / "fit2")]) == 0
+    assert "names more than one point" in capsys.readouterr().out
 
 
 def test_diagnose_on_a_table_names_the_missing_physics(tmp_path):

@@ -113,3 +113,29 @@ def test_a_stribeck_curve_seen_at_one_pressure_is_not_named_mixed_lubrication():
         said = [r for r in dg.refused if r.get("tied")]  # and the report says why neither is named
         assert said and set(said[0]["tied"]) == {"mixed_lubrication", "stribeck_friction"}
         assert "alike" in said[0]["why"]
+
+
+def test_two_effects_that_each_explain_their_own_runs_are_not_a_tie():
+    """Run by run, a friction at low speed and a leak at high pressure of like size look like a
+    tie (each run prefers the one that explains it); fitted together the second still pays, so
+    they are two effects, asked in turn.  Two laws for the same structure: the second adds
+    nothing once the first is in."""
+    from motorid.discrepancy.tie import complementary
+
+    class Screen:  # fits "together" to the χ² given
+        def __init__(self, together):
+            self.together, self.asked = together, []
+
+        def fit(self, mechanisms, start):
+            self.asked.append((tuple(m for m in mechanisms), dict(start)))
+            return SimpleNamespace(chi2=self.together, values=start)
+
+    current = SimpleNamespace(chi2=10_000.0)
+    a = SimpleNamespace(mechanism="friction", fit=SimpleNamespace(chi2=6_000.0, values={"a": 1.0}), cells=None)
+    b = SimpleNamespace(mechanism="leak", fit=SimpleNamespace(chi2=6_100.0, values={"b": 2.0}), cells=None)
+    two = Screen(together=2_100.0)  # the leak still removes 3 900 of its 3 900 with the friction in
+    assert complementary(two, current, ["base"], a, b, 10.0)
+    assert two.asked == [(("base", "friction", "leak"), {"a": 1.0, "b": 2.0})]
+    assert not complementary(Screen(together=5_990.0), current, [], a, b, 10.0)  # one structure, two laws
+    assert not complementary(Screen(together=4_500.0), current, [], a, b, 10.0)  # 1 500 of 3 900: under half
+    assert not complementary(None, current, [], a, b, 10.0)

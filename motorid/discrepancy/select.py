@@ -33,7 +33,7 @@ import numpy as np
 from motorid._aot import cached_jit, trim_heap
 from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT, Location, locate
 from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen, thread_pool
-from motorid.discrepancy.tie import near_tie, run_vuong_z, tied
+from motorid.discrepancy.tie import complementary, near_tie, run_vuong_z, tied
 from motorid.discrepancy.unexplained import extrapolation_check
 from motorid.discrepancy.verdicts import (LINEARITY_SHARE, caveats, refuse_cancelling_pair, ripple_gain_only,
                                          transducer_like, widen_for_the_ripple_model)
@@ -375,13 +375,21 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
             _refit_in_full(scored[:2], dataset, spec, current_mechs, noise, inliers, ref, n_res)
             scored[:2] = sorted(scored[:2], key=lambda c: -c.delta_bic)
             lap("finalists on every sample")
-        if tied(scored, min_evidence, dataset, screen):  # two names explain it alike: naming one would be a guess
+        two = tied(scored, min_evidence, dataset, screen)
+        if two and complementary(screen, current_cells, current_mechs, scored[0], scored[1], min_evidence):
+            say(f"{scored[0].mechanism.id} and {scored[1].mechanism.id} score alike but explain different "
+                "structure (the second still pays with the first in the model): two effects, asked in turn")
+            two = False
+        if two:  # two names explain it alike: naming one would be a guess
             steps.append([{"id": c.mechanism.id, "delta_chi2": c.delta_chi2, "delta_bic": c.delta_bic,
                            "cv_gain": None, "accepted": False, "tied": i < 2} for i, c in enumerate(scored)])
             z = run_vuong_z(scored[0], scored[1], dataset, screen)  # the runs' own verdict, for the record
             steps[-1][0]["run_z"] = z
             by = "" if z is None else f" (the first better by {z:.2g} run-level standard errors)"
-            say(f"{scored[0].mechanism.id} and {scored[1].mechanism.id} explain it alike{by}; neither is named")
+            pair = f"{scored[0].mechanism.id} and {scored[1].mechanism.id}"
+            say(f"{pair} explain it alike{by}; neither is named")
+            refused.append({"id": pair, "why": f"the two explain it alike{by}: naming one would be a guess",
+                            "extrapolation": None, "tied": [scored[0].mechanism.id, scored[1].mechanism.id]})
             break
         if current_cv is None and folds > 1:
             current_cv = screen.held_out_chi2(current_mechs, current_cells.params_all, fold_runs)

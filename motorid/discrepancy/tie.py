@@ -5,7 +5,8 @@ one in the Sommerfeld number μω/ΔP where every slow run is at one pressure) f
 almost alike.  Which one then wins by a few units of χ² out of a gain of a million is
 decided by the noise, and a wrong name is worse than none: diagnose names neither.
 
-Two tests, either enough for a tie:
+Two tests, either enough for a tie (unless the two are shown to be two effects, not
+one: :func:`complementary`):
 
 * the fixed one (:func:`tied`): the first beats the second by less than
   ``min_evidence`` in ΔBIC or in Δχ²;
@@ -81,6 +82,34 @@ def tied(scored: list, min_evidence: float, dataset=None, screen=None) -> bool:
         return False
     z = run_vuong_z(a, b, dataset, screen)
     return z is not None and z < TIE_Z
+
+
+def cells_of(cand):
+    """A candidate's fit on the screening cells (kept as ``cells`` where it was refitted on every
+    sample), or None where it was only ranked."""
+    cells = getattr(cand, "cells", None)
+    if cells is not None:
+        return cells
+    return cand.fit if cand.fit is not None and not hasattr(cand.fit, "residuals") else None
+
+
+def complementary(screen, current_cells, current_mechs, first, second, min_evidence: float) -> bool:
+    """Whether the two best explain *different* structure (two effects, each to be named in
+    turn) rather than the same structure alike (a tie): fitted together on the cells, the
+    second still adds more than ``min_evidence`` and more than half of what it gains alone
+    beyond the current model.  Two true effects of like size in different runs (a friction
+    at low speed, a leak at high pressure) look like a tie to :func:`run_vuong_z` — each run
+    prefers the one that explains it — and are not one."""
+    a, b = cells_of(first), cells_of(second)
+    if screen is None or a is None or b is None or current_cells is None:
+        return False
+    start = {**b.values, **a.values}
+    both = screen.fit(list(current_mechs) + [first.mechanism, second.mechanism], start)
+    if not np.isfinite(both.chi2):
+        return False
+    added = a.chi2 - both.chi2
+    alone = current_cells.chi2 - b.chi2
+    return added > min_evidence and added > 0.5 * alone
 
 
 def near_tie(scored: list, min_evidence: float) -> bool:

@@ -102,6 +102,21 @@ def fitted_parameters(doc: dict, spec, mechanisms):
     return params, names, cov, unidentified
 
 
+def refuse_repeated_ids(table) -> None:
+    """Predictions are keyed by ``point_id``: one that names two points is refused (one line,
+    naming the file, the id and its lines)."""
+    if not table.has_point_id:
+        return
+    ids = np.asarray(table.point_id, dtype=object)
+    _, first, counts = np.unique(ids, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        k = int(first[np.flatnonzero(counts > 1)].min())
+        twins = np.flatnonzero(ids == ids[k])
+        where = ", ".join(f"{Path(str(table.file[i])).name} line {table.line[i]}" for i in twins[:3])
+        raise InputError(f"{Path(str(table.file[k])).name}: column 'point_id': '{ids[k]}' names {twins.size} points "
+                         f"({where}); predictions are keyed by point_id: give each point its own")
+
+
 def predict_points(result, table, spec=None, physics_only: bool = False) -> pd.DataFrame:
     """Predictions at every point of ``table`` (:class:`motorid.io.tables.PointTable`) from a fit.
 
@@ -116,6 +131,7 @@ def predict_points(result, table, spec=None, physics_only: bool = False) -> pd.D
     """
     from motorid.identify.tables import angle_samples, bind_mechanisms, point_channels
 
+    refuse_repeated_ids(table)
     doc, spec, mechanisms = result if isinstance(result, tuple) else load_result(result, spec)
     params, names, cov, unidentified = fitted_parameters(doc, spec, mechanisms)
     for k in _carried(doc):  # held at 0 by the fit, another carrying it: not the spec's default

@@ -1,7 +1,7 @@
 """A table checked against the ideal machine of its spec before a fit takes it.
 
 A unit may be valid and still wrong, and a sign convention may be another maker's:
-a fit takes either into K_L and K_F and reports them identified.  Three checks,
+a fit takes either into K_L and K_F and reports them identified.  Four checks,
 each a one-line refusal that names the ratio and its likely cause:
 
 - the port flow against the swept flow D·ω/2π (port A; port B's against −D·ω/2π):
@@ -10,6 +10,10 @@ each a one-line refusal that names the ratio and its likely cause:
   slow map), within :data:`IDEAL_RATIO`;
 - the torque against the pressure torque D·ΔP/2π (a slope through the origin over
   points above a tenth of the largest |ΔP|), within :data:`IDEAL_RATIO`;
+- the torque must follow the pressure torque: where the points span pressure, D·ΔP/2π
+  (with a constant and a sign-of-speed friction) explains at least
+  :data:`MIN_PRESSURE_SHARE` of its variation (a square gridded map read with its two
+  axes swapped fits, wrongly, with every ratio in range);
 - the power balance: where a point holds the torque and the high-pressure port's
   flow, its overall efficiency (ISO 4409, :mod:`motorid.physics.efficiency`) in the
   median over a mode's points must not exceed :data:`MAX_EFFICIENCY` (a pump map in
@@ -67,6 +71,27 @@ def _torque_slope(t, ideal) -> tuple[float, int]:
     return _slope_of_larger(t, ideal, ok, least=3)
 
 
+#: the share of the torque's variation the pressure torque must explain where the points span
+#: pressure (:func:`_torque_follows_pressure`); a working motor's losses are a fraction of D·ΔP/2π
+MIN_PRESSURE_SHARE = 0.5
+
+
+def _torque_follows_pressure(t, ideal, speed) -> tuple[float, int]:
+    """R² of the torque on a·D·ΔP/2π + b·sgn ω + c (the pressure torque and a Coulomb-like
+    friction) over the finite points, and their count; NaN where the points do not span
+    pressure (the pressure torque's range under 0.3 of the largest |torque|) or are too few."""
+    ok = np.isfinite(t) & np.isfinite(ideal) & np.isfinite(speed)
+    if ok.sum() < 8:
+        return float("nan"), int(ok.sum())
+    t, ideal, speed = t[ok], ideal[ok], speed[ok]
+    if np.ptp(ideal) < 0.3 * np.max(np.abs(t)) or np.ptp(t) == 0:
+        return float("nan"), int(ok.sum())
+    X = np.column_stack([ideal, np.sign(speed), np.ones_like(t)])
+    coef = np.linalg.lstsq(X, t, rcond=None)[0]
+    rss = float(np.sum((t - X @ coef) ** 2))
+    return 1.0 - rss / float(np.sum((t - t.mean()) ** 2)), int(ok.sum())
+
+
 def check_against_ideal(table, path, counted: str = "points", whose: str = "") -> None:
     """Refuse (:class:`InputError`, one line) a table whose flows or torque are not near the ideal
     machine's, or whose points give out more power than they take in.  ``counted``, ``whose``: the
@@ -95,6 +120,11 @@ def check_against_ideal(table, path, counted: str = "points", whose: str = "") -
             why = _CAUSES + sign_hint
         raise InputError(f"{name}: {whose}{words} is {k:.3g}× {base} of D = {cm3:.4g} cm³/rev over {n} "
                          f"{counted}, outside {IDEAL_RATIO[0]}-{IDEAL_RATIO[1]}: {why}")
+    share, n = _torque_follows_pressure(m["torque"], ideal, np.asarray(table.speed, float))
+    if np.isfinite(share) and share < MIN_PRESSURE_SHARE:
+        raise InputError(f"{name}: {whose}torque does not follow the pressure torque D·ΔP/2π of D = {cm3:.4g} "
+                         f"cm³/rev (it explains {max(share, 0.0):.0%} of the torque's variation over {n} {counted}, "
+                         f"a working motor's far more): the pressures read are not the motor's ports")
     # the power balance of each mode, at points that hold both the torque and the high-pressure flow
     _, _, eta = efficiencies(m["torque"], m["q_a"], m["q_b"], table.speed, table.p_a, table.p_b,
                              np.asarray(table.displacement, float))

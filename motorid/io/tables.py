@@ -273,6 +273,12 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
         ids = np.array([f"{path.name}:{k}" for k in lines], dtype=object)
         has_id = False
     notes = [] if hot_note is None else [f"{path.name}: {hot_note}"]
+    if has_id and len(set(ids)) < ids.size:
+        names, counts = np.unique(ids, return_counts=True)
+        twice = [str(x) for x in names[counts > 1]]
+        notes.append(f"{path.name}: point_id {', '.join(repr(x) for x in twice[:3])}"
+                     f"{' …' if len(twice) > 3 else ''} names more than one point (fitted as separate points; "
+                     "predict refuses repeated ids)")
     effs = {k[4:]: column(k)[0] * found[k][1] for k in found if k.startswith("eff:")}
     if effs:
         if "t" in effs and len(effs) == 1:
