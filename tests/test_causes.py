@@ -116,6 +116,30 @@ def test_empirical_term_recovers_a_known_law_and_stays_silent_on_noise():
     assert propose("q_case", x, sigma * rng.standard_normal(n), sigma, run_of, SPEC) is None
 
 
+def test_a_case_drain_term_is_even_in_speed():
+    """A case leak that grows with |ω| in both directions of rotation (a new user's four-quadrant
+    map): the library's odd speed factors had proposed ω|ω|·(P_A+P_B) − sgn ω·√|ΔP|, a drain that
+    changes with the direction; its even factors hold the law itself."""
+    from motorid.discrepancy.empirical import library
+
+    rng = np.random.default_rng(11)
+    runs, per = 24, 60
+    speed = np.repeat(rng.choice([-1, 1], runs) * rng.uniform(5, 300, runs), per)
+    p_a = np.repeat(rng.uniform(2e6, 2.5e7, runs), per)
+    p_b = np.repeat(rng.uniform(5e5, 3e6, runs), per)
+    mu = np.repeat(rng.uniform(0.015, 0.045, runs), per)
+    n = runs * per
+    x = model.make_samples(SPEC, rng.uniform(0, 2 * np.pi, n), speed, p_a, p_b, np.full(n, 7e4), mu)
+    sigma = np.full(n, 2e-7)
+    law = 3e-16 * np.abs(speed) * (p_a + p_b)
+    term = propose("q_case", x, law + sigma * rng.standard_normal(n), sigma, np.repeat(np.arange(runs), per), SPEC)
+    assert term is not None and [t.text for t, _ in term.terms] == ["|ω|·(P_A+P_B)"], term.formula
+    assert abs(term.terms[0][1] - 3e-16) < 0.05 * 3e-16
+    drain = {t.text for t in library(9, channel="q_case")}
+    assert not any("sgn ω" in t or "ω|ω|" in t for t in drain)
+    assert {"sgn ω·ΔP", "ω|ω|"} <= {t.text for t in library(9, channel="torque")}
+
+
 def test_a_term_that_works_by_trading_with_the_models_own_shapes_is_printed_with_them():
     """Low port at one pressure: P_A² is mostly the bearing-friction shape sgn ω·(P_A+P_B) and a
     constant.  A residual that is only P_A²'s curvature (what those shapes leave of it) takes a

@@ -4,7 +4,8 @@ A library of physically shaped candidate terms (in the spirit of pysindy: the
 library is kept apart from the optimizer, so a selected term prints as
 physics) is regressed on a channel's residuals after the final fit:
 
-- speed factors 1, sgn ω, ω, ω|ω|, sgn ω·√|ω|;
+- speed factors 1, sgn ω, ω, ω|ω|, sgn ω·√|ω| (odd in ω, as a friction or a swept flow
+  is); for the case drain, whose leak does not reverse with the shaft, 1, |ω|, ω², √|ω|;
 - pressure factors 1, ΔP, |ΔP|, √|ΔP|, P_A+P_B, P_A−P_c, P_B−P_c,
   (P_A−P_c)(P_B−P_c), ΔP², sgn ΔP·√|ΔP|, ΔP|ΔP|, (P_A+P_B)² (the odd ones
   for a flow between the ports, which follows the sign of ΔP);
@@ -61,6 +62,14 @@ def _speed_factors():
             Factor("sgn ω·√|ω|", 0, -0.5, lambda x: np.asarray(x.direction, float) * np.sqrt(np.abs(x.speed)))]
 
 
+def _even_speed_factors():
+    """A case-drain flow does not reverse with the shaft: its speed factors are even in ω."""
+    return [Factor("", 0, 0, lambda x: np.ones_like(x.speed)),
+            Factor("|ω|", 0, -1, lambda x: np.abs(x.speed)),
+            Factor("ω²", 0, -2, lambda x: x.speed ** 2),
+            Factor("√|ω|", 0, -0.5, lambda x: np.sqrt(np.abs(x.speed)))]
+
+
 def _pressure_factors():
     return [Factor("", 0, 0, lambda x: np.ones_like(x.speed)),
             Factor("ΔP", 1, 0, lambda x: x.p_a - x.p_b),
@@ -115,12 +124,14 @@ class Term:
         return v
 
 
-def library(pistons: int, harmonics: bool = True, viscosity: bool = True) -> list[Term]:
+def library(pistons: int, harmonics: bool = True, viscosity: bool = True, channel: str | None = None) -> list[Term]:
     """Every candidate term (see module doc), without the constant; ``harmonics=False`` leaves
     out the shaft-order harmonics (θ-averaged operating points have no shaft angle),
-    ``viscosity=False`` the μ factors (data at one viscosity: μ·t and t/μ are t rescaled)."""
+    ``viscosity=False`` the μ factors (data at one viscosity: μ·t and t/μ are t rescaled);
+    ``channel="q_case"`` takes the speed factors even in ω (the drain does not reverse with the
+    shaft: 1, |ω|, ω², √|ω|)."""
     terms = []
-    for a in _speed_factors():
+    for a in _even_speed_factors() if channel == "q_case" else _speed_factors():
         for b in _pressure_factors():
             for c in _viscosity_factors() if viscosity else _viscosity_factors()[:1]:
                 if a.text or b.text or c.text:
@@ -275,7 +286,7 @@ def propose(channel: str, x, residual, sigma, run_of, spec, folds: int = 3, regi
     """
     mu = np.asarray(x.viscosity, float)
     varies = bool(np.nanmax(mu) - np.nanmin(mu) > 1e-3 * np.nanmean(mu))
-    terms = library(spec.pistons, harmonics, viscosity=varies)
+    terms = library(spec.pistons, harmonics, viscosity=varies, channel=channel)
     N, L = _design(channel, x, spec, terms)
     w = 1.0 / np.asarray(sigma, float)
     y = np.asarray(residual, float) * w
