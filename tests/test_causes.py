@@ -91,17 +91,22 @@ def test_library_columns_that_the_data_cannot_tell_apart_are_kept_once():
     assert _distinct_columns(X) == [0, 2, 5]
 
 
-def test_empirical_term_recovers_a_known_law_and_stays_silent_on_noise():
-    rng = np.random.default_rng(5)
-    runs = 24
-    per = 80
-    speed = np.repeat(rng.choice([-1, 1], runs) * rng.uniform(1, 200, runs), per)
+def _runs_both_ways(rng, runs: int, per: int, slowest: float, fastest: float):
+    """Samples of ``runs`` steady runs turning either way (|ω| in [slowest, fastest] rad/s), random
+    pressures and viscosities → (samples, speed, p_a, p_b, run of each sample)."""
+    speed = np.repeat(rng.choice([-1, 1], runs) * rng.uniform(slowest, fastest, runs), per)
     p_a = np.repeat(rng.uniform(2e6, 2.5e7, runs), per)
     p_b = np.repeat(rng.uniform(5e5, 3e6, runs), per)
     mu = np.repeat(rng.uniform(0.015, 0.045, runs), per)
     n = runs * per
     x = model.make_samples(SPEC, rng.uniform(0, 2 * np.pi, n), speed, p_a, p_b, np.full(n, 7e4), mu)
-    run_of = np.repeat(np.arange(runs), per)
+    return x, speed, p_a, p_b, np.repeat(np.arange(runs), per)
+
+
+def test_empirical_term_recovers_a_known_law_and_stays_silent_on_noise():
+    rng = np.random.default_rng(5)
+    x, speed, p_a, p_b, run_of = _runs_both_ways(rng, 24, 80, 1, 200)
+    n = run_of.size
     sigma = np.full(n, 1e-7)
     law = 5e-20 * (p_a - 7e4) * (p_b - 7e4)
     term = propose("q_case", x, law + sigma * rng.standard_normal(n), sigma, run_of, SPEC)
@@ -123,16 +128,10 @@ def test_a_case_drain_term_is_even_in_speed():
     from motorid.discrepancy.empirical import library
 
     rng = np.random.default_rng(11)
-    runs, per = 24, 60
-    speed = np.repeat(rng.choice([-1, 1], runs) * rng.uniform(5, 300, runs), per)
-    p_a = np.repeat(rng.uniform(2e6, 2.5e7, runs), per)
-    p_b = np.repeat(rng.uniform(5e5, 3e6, runs), per)
-    mu = np.repeat(rng.uniform(0.015, 0.045, runs), per)
-    n = runs * per
-    x = model.make_samples(SPEC, rng.uniform(0, 2 * np.pi, n), speed, p_a, p_b, np.full(n, 7e4), mu)
-    sigma = np.full(n, 2e-7)
+    x, speed, p_a, p_b, run_of = _runs_both_ways(rng, 24, 60, 5, 300)
+    sigma = np.full(run_of.size, 2e-7)
     law = 3e-16 * np.abs(speed) * (p_a + p_b)
-    term = propose("q_case", x, law + sigma * rng.standard_normal(n), sigma, np.repeat(np.arange(runs), per), SPEC)
+    term = propose("q_case", x, law + sigma * rng.standard_normal(run_of.size), sigma, run_of, SPEC)
     assert term is not None and [t.text for t, _ in term.terms] == ["|ω|·(P_A+P_B)"], term.formula
     assert abs(term.terms[0][1] - 3e-16) < 0.05 * 3e-16
     drain = {t.text for t in library(9, channel="q_case")}
