@@ -17,7 +17,7 @@ from motorid.bench.protocols import parse_protocol, read_toml
 from motorid.bench.simulate import simulate_campaign
 from motorid.bench.truth import Truth
 from motorid.discrepancy.select import diagnose
-from motorid.discrepancy.tie import TIE_Z, chi2_by_run, run_vuong_z, tied
+from motorid.discrepancy.tie import MIN_RUNS, TIE_Z, chi2_by_run, run_vuong_z, tied
 from motorid.identify.extract import extract
 from motorid.io.spec import load_motor_spec
 from motorid.physics import registry as catalog
@@ -79,6 +79,11 @@ def test_run_level_z_sees_a_difference_won_by_a_few_runs_as_noise_and_a_steady_o
     b = _cand(_fit(base + steady), 1000.0)
     assert run_vuong_z(a, b, ds) == pytest.approx(np.sqrt(40))
     assert not tied([a, b], 10.0, ds)
+    # a campaign of few runs cannot judge (z ≤ √runs): the fixed rule alone decides
+    few = _dataset(MIN_RUNS - 1)
+    a = _cand(_fit(base[:MIN_RUNS - 1]), 1000.0 + 14.0)
+    b = _cand(_fit(base[:MIN_RUNS - 1] + noisy[:MIN_RUNS - 1]), 1000.0)
+    assert run_vuong_z(a, b, few) is None and not tied([a, b], 10.0, few)
 
 
 def _one_pressure_campaign(truth: dict, seed: int):

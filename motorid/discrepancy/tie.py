@@ -27,6 +27,9 @@ import numpy as np
 
 #: a name must beat the runner-up by this many run-level standard errors (one-sided 2.3 %)
 TIE_Z = 2.0
+#: runs (holding data) below which the runs cannot judge (z could not reach TIE_Z unless nearly
+#: every run agreed; a log of one set point is one run): the fixed rule decides alone
+MIN_RUNS = 10
 
 
 def chi2_by_run(fit, dataset, screen=None) -> np.ndarray | None:
@@ -57,9 +60,10 @@ def chi2_by_run(fit, dataset, screen=None) -> np.ndarray | None:
 
 def run_vuong_z(first, second, dataset, screen=None) -> float | None:
     """z of "``first`` fits better than ``second``", the runs as units (module doc);
-    None where either's χ² cannot be put to runs or the two fit every run alike."""
+    None where either's χ² cannot be put to runs, fewer than :data:`MIN_RUNS` runs hold data,
+    or the two fit every run alike."""
     a, b = chi2_by_run(first.fit, dataset, screen), chi2_by_run(second.fit, dataset, screen)
-    if a is None or b is None or a.shape != b.shape:
+    if a is None or b is None or a.shape != b.shape or np.count_nonzero((a > 0) | (b > 0)) < MIN_RUNS:
         return None
     d = b - a
     scale = float(np.sqrt(np.sum(d * d)))
