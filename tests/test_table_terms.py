@@ -15,7 +15,7 @@ import pytest
 
 from motorid.bench.maps import map_grid, simulate_map
 from motorid.comparators.evaluate import MotoridModel, held_out
-from motorid.discrepancy.table_terms import MotoridWithTerms, search, unexplained_table_entries
+from motorid.discrepancy.table_terms import MotoridWithTerms, TermsLeftOut, search, unexplained_table_entries
 from motorid.identify.tables import fit_table
 from motorid.io.spec import MotorSpec, OilSpec
 from motorid.io.tables import read_table
@@ -63,7 +63,13 @@ def test_the_term_search_finds_the_shape_and_its_size(squared):
 
 def test_held_out_points_are_predicted_better_with_the_term(squared):
     without = held_out(MotoridModel(SPEC), squared)
-    with_term = held_out(MotoridWithTerms(SPEC), squared)
+    with_terms = MotoridWithTerms(SPEC)
+    with_term = held_out(with_terms, squared)
+    # the row without the terms on the with-terms model's own fits is the plain model's row
+    left_out = held_out(TermsLeftOut(with_terms, "motorid"), squared)
+    for kind in ("kfold", "extrapolate_speed", "extrapolate_pressure"):
+        for c, e in without[kind].items():
+            assert left_out[kind][c]["rms"] == pytest.approx(e["rms"], rel=1e-9), (kind, c)
     for kind in ("kfold", "extrapolate_speed"):
         a, b = without[kind]["torque"]["rms"], with_term[kind]["torque"]["rms"]
         assert b < 0.6 * a, (kind, a, b)
@@ -102,6 +108,13 @@ def test_diagnose_command_reports_the_term_unexplained(tmp_path, capsys):
     rows = doc["comparison"]["models"]
     ours = next(k for k in rows if k.startswith("motorid"))
     assert ours.endswith("empirical term"), list(rows)
+    # beside it the same model without the term, refitted on the same folds: the term lowers the
+    # torque's 5-fold error there too, where every parameter is free
+    assert list(rows).index("motorid") > list(rows).index(ours)
+    term = doc["unexplained"][0]["empirical_term"]
+    refit = term["refit_kfold_percent_of_span"]
+    assert term["confirmed_by_refit"] and refit["with"] < refit["without"], refit
+    assert refit["without"] == pytest.approx(rows["motorid"]["kfold"]["torque"]["percent_of_span"], rel=1e-12)
     # result.json beside diagnosis.json (the table's own fit and comparison): predict takes the folder
     res = json.loads((out / "result.json").read_text())
     assert res["fit"]["mechanisms"] == [] and res["parameters"]["KF"]["identifiable"]

@@ -58,6 +58,40 @@ def test_table_fit_recovers_parameters_and_says_what_it_cannot(table_fit):
     assert tf.table_noise["q_case"] == pytest.approx(NOISE["q_case_lpm"] * 1e-3 / 60, rel=0.3)
 
 
+def test_a_positive_parameter_the_data_do_not_tell_from_zero_gets_an_interval_cut_at_zero():
+    """K_v at a thousandth of its usual size is lost in the torque noise: its std exceeds its value.
+    Its 95 % interval stops at 0 (a positive parameter ends there) and says so, in result.json, the
+    text summary and the report, while a parameter the data pin down keeps its symmetric interval."""
+    from motorid.identify.results import result_document
+    from motorid.identify.tables import fit_table
+    from motorid.report.summary import format_fit
+
+    truth = {**TRUTH, "Kv": 5.0}
+    g = map_grid([100, 400, 1000, 2000], [20, 100, 200, 300], 4)
+    df = simulate_map(SPEC, truth, g, noise=NOISE, rng=np.random.default_rng(3))
+    tf = fit_table(read_table_frame(df), SPEC)
+    doc = result_document(tf.ls, SPEC)
+    kv, kf = doc["parameters"]["Kv"], doc["parameters"]["KF"]
+    assert kv["identifiable"] and kv["std"] > kv["value"] > 0, kv
+    assert kv["ci95"][0] == 0.0 and kv["ci95"][1] == pytest.approx(kv["value"] + 1.959964 * kv["std"], rel=1e-5)
+    assert kv["indistinct_from_zero"] and "zero" in kv["note"]
+    assert "indistinct_from_zero" not in kf and kf["ci95"][0] == pytest.approx(kf["value"] - 1.959964 * kf["std"],
+                                                                               rel=1e-5)
+    line = next(l for l in format_fit(doc).splitlines() if l.startswith("Kv "))
+    assert "not told from 0" in line
+
+
+def read_table_frame(df):
+    """A table from a data frame, through the reader (a temporary CSV)."""
+    import tempfile
+    from pathlib import Path
+
+    from motorid.io.tables import read_table
+
+    with tempfile.TemporaryDirectory() as d:
+        return read_table(_write(df, Path(d) / "map.csv"), SPEC)
+
+
 def test_theta_average_matches_the_mean_pressure_torque():
     """The θ-average of the one model's pressure torque and swept flow is DΔP/2π and Dω/2π (Eq. 16, 43)."""
     from motorid.identify.tables import point_channels, table_samples

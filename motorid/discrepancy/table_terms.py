@@ -151,6 +151,54 @@ class MotoridWithTerms(MotoridModel):
         return out
 
 
+class TermsLeftOut:
+    """The model of a :class:`MotoridWithTerms` without its empirical terms, on the same fits (each
+    split's fit is the with-terms model's own base fit): the held-out row that shows what the terms add
+    when every parameter is refitted per fold."""
+
+    reference = MotoridModel.reference
+
+    def __init__(self, with_terms: MotoridWithTerms, label: str):
+        self.inner, self.name = with_terms, label
+
+    def fit(self, table):
+        return self.fit_split(table, np.ones(len(table), bool))
+
+    def fit_split(self, table, train):
+        return self.inner.fit_split(table, train).base
+
+
+def confirm_by_refit(entries: list, comparison: dict, with_terms: MotoridWithTerms, table, label: str) -> None:
+    """Add motorid's row without the empirical terms to ``comparison`` (after the with-terms rows, on their
+    fits) and say in each ``entries``' term whether it lowers its channel's K-fold error there, where
+    every parameter is refitted per fold: the term's own held-out gain is measured on the residuals of
+    the model held fixed, and a term whose shape the refitted parameters take over gains nothing once
+    they are free (``empirical_term["confirmed_by_refit"]``, the two errors in % of span)."""
+    from motorid.comparators.evaluate import held_out
+
+    rows = comparison["models"]
+    without = held_out(TermsLeftOut(with_terms, label), table)
+    without["reference"] = TermsLeftOut.reference
+    names = list(rows)
+    at = max(i for i, n in enumerate(names) if n.startswith(with_terms.name)) + 1
+    comparison["models"] = {**{n: rows[n] for n in names[:at]}, label: without, **{n: rows[n] for n in names[at:]}}
+    for e in entries:
+        term = e.get("empirical_term")
+        if not term:
+            continue
+        c = e["channel"]
+        a = (without["kfold"].get(c) or {}).get("percent_of_span")
+        b = (rows[with_terms.name]["kfold"].get(c) or {}).get("percent_of_span")
+        if a is None or b is None:
+            continue
+        term["refit_kfold_percent_of_span"] = {"without": a, "with": b}
+        term["confirmed_by_refit"] = bool(b < a)
+        if b >= a:
+            e["description"] += (f"; but with every parameter refitted per fold it does not lower the 5-fold error of "
+                                 f"the {CHANNEL_WORDS[c]} ({a:.3g} → {b:.3g} % of span): the model's own parameters "
+                                 "take most of it up, so it is not confirmed")
+
+
 class _FittedWithTerms:
     def __init__(self, base):
         self.base = base

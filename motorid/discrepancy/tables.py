@@ -14,6 +14,12 @@ def _profile_bic(tf) -> float:
     Σ_c [n_c ln(RSS_c / n_c) + 2 Σ_i ln w_i] + k ln n (Gaussian likelihood, σ_i = s_c w_i with w_i
     each point's σ relative to the median, its noise floor included: identify/tables.py);
     in a joint fit the logs add their χ² at their own (held) noise levels and their count."""
+    total, n_all = _profile_deviance(tf)
+    return total + len(tf.ls.free) * math.log(max(n_all, 1))
+
+
+def _profile_deviance(tf) -> tuple[float, int]:
+    """(−2 log L of :func:`_profile_bic` without its k ln n, the count n of what it sums)."""
     t = tf.table
     total, n_all = 0.0, 0
     if tf.dataset is not None:
@@ -32,7 +38,7 @@ def _profile_bic(tf) -> float:
         n = int(ok.sum())
         total += n * math.log(max(float(np.mean(r**2)), 1e-300)) + 2.0 * float(np.sum(np.log(w)))
         n_all += n
-    return total + len(tf.ls.free) * math.log(max(n_all, 1))
+    return total, n_all
 
 
 #: ΔBIC a mechanism short of ``min_evidence`` must still earn ("strong" evidence on Kass & Raftery's
@@ -252,6 +258,45 @@ def selection_points(table, n: int | None = None) -> np.ndarray | None:
     return chosen if chosen.size < N else None
 
 
+def table_tie(table, spec, current: list, trials: list, bic: float, best_fit, min_evidence: float,
+              joint: dict, alone: bool) -> dict | None:
+    """The selection step where the two best candidates explain the table alike, else None
+    (discrepancy/tie.py: a wrong name is worse than none).
+
+    ``trials``: (BIC, mechanism, table fit), best first.  Both must lower the BIC by ``min_evidence``;
+    they tie where the first beats the second by less than ``min_evidence`` in BIC or in −2 log L
+    (one parameter fewer must not decide the name), or by less than :data:`~motorid.discrepancy.tie.TIE_Z`
+    standard errors with the points as units (:func:`~motorid.discrepancy.tie.point_vuong_z`).  Not a
+    tie where the two are two effects (fitted together, the second still lowers the BIC by more than
+    ``min_evidence`` and by more than half of what it gains alone), nor, on a table alone, where the
+    second is a stand-in the first was not (it trades a channel away or fails the region splits)."""
+    from motorid.discrepancy.tie import TIE_Z, point_vuong_z
+    from motorid.identify.tables import fit_table
+
+    if len(trials) < 2:
+        return None
+    (b1, m1, f1), (b2, m2, f2) = trials[:2]
+    if bic - b1 < min_evidence or bic - b2 < min_evidence:
+        return None
+    gap = min(b2 - b1, _profile_deviance(f2)[0] - _profile_deviance(f1)[0])
+    z = point_vuong_z(f1, f2, best_fit.table_sigma)
+    if gap >= min_evidence and (z is None or z >= TIE_Z):
+        return None
+    both = fit_table(table, spec, list(current) + [m1, m2], start_values={**f2.ls.params_all, **f1.ls.params_all},
+                     **joint)
+    added = b1 - _profile_bic(both)
+    if added > min_evidence and added > 0.5 * (bic - b2):
+        return None  # two effects: the first is named now, the second asked in turn
+    if alone and (traded_channel(best_fit, f2, min_evidence) is not None
+                  or setting_split_refusal(table, spec, current, m2) is not None
+                  or region_split_refusal(table, spec, current, m2, best_fit.table_sigma, min_evidence) is not None):
+        return None  # the runner-up is a stand-in: no rival to the first
+    by = f"; the first better by {z:.2g} point-level standard errors" if z is not None else ""
+    return {"id": f"{m1.id} and {m2.id}", "delta_bic": bic - b1, "tied": [m1.id, m2.id], "point_z": z,
+            "refused": f"the two explain it alike (ΔBIC {bic - b1:.1f} and {bic - b2:.1f}{by}): naming one "
+                       "would be a guess"}
+
+
 def _abs_dp(table, dataset) -> np.ndarray:
     """|ΔP| [Pa] of the table's points and of the logs' running samples (a joint fit)."""
     out = [np.abs(np.asarray(table.dp, dtype=float))]
@@ -343,6 +388,12 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
             trials.pop(0)  # refused this round; asked again once another mechanism is in the model
         if not trials:
             break
+        tie = table_tie(table, spec, current, trials, bic, best_fit, min_evidence, joint, alone)
+        if tie is not None:  # two names explain it alike: neither is named
+            steps.append(tie)
+            if progress:
+                progress(f"{tie['id']}: {tie['refused']}; neither is named")
+            break
         b, mech, tf = trials[0]
         steps.append({"id": mech.id, "delta_bic": bic - b})
         if bic - b < min_evidence:
@@ -369,15 +420,17 @@ def diagnose_table(table, spec, min_evidence: float = 10.0, max_mechanisms: int 
         table = every
         base_fit = fit_table(table, spec, **joint)
         best_fit = fit_table(table, spec, current, **joint) if current else base_fit
-    from motorid.discrepancy.table_terms import MotoridWithTerms, unexplained_table_entries
+    from motorid.discrepancy.table_terms import MotoridWithTerms, confirm_by_refit, unexplained_table_entries
 
     unexplained = unexplained_table_entries(best_fit, spec)  # on the table's points, logs or not
     model = None
+    label = "motorid" + "".join(" + " + m.id for m in current)
     # held out, the empirical term is chosen again on each fold's training points alone
     if any(u.get("empirical_term") for u in unexplained):
-        model = MotoridWithTerms(spec, current, label="motorid" + "".join(" + " + m.id for m in current)
-                                 + " + empirical term")
+        model = MotoridWithTerms(spec, current, label=label + " + empirical term")
     comparison = compare(table, spec, mechanisms=current, motorid_model=model) if len(table) >= 10 else None
+    if comparison is not None and model is not None:  # the same model without the term, on the same fits
+        confirm_by_refit(unexplained, comparison, model, table, label)
     return {"mechanisms": current, "fit": best_fit, "base_fit": base_fit, "steps": steps, "comparison": comparison,
             "unexplained": unexplained, "selection_points": selection}
 
@@ -412,6 +465,16 @@ def _selection_words(sel) -> dict:
                               "the cells of an even grid over the operating range; the chosen model fitted and "
                               "compared on every point")
     return out
+
+
+def _refused(dg: dict) -> list:
+    """The selection's refusals in diagnosis.json's ``refused_stand_ins`` (id, why; the tied pair where
+    two explained it alike): a mechanism refused in one round and named in a later one is left out, one
+    refused twice keeps its last word."""
+    named = {m.id for m in dg["mechanisms"]}
+    out = {st["id"]: {"id": st["id"], "why": st["refused"], **({"tied": st["tied"]} if "tied" in st else {})}
+           for st in dg["steps"] if isinstance(st, dict) and st.get("refused") and st["id"] not in named}
+    return list(out.values())
 
 
 def diagnosis_table_document(dg: dict, spec) -> dict:
@@ -450,6 +513,7 @@ def diagnosis_table_document(dg: dict, spec) -> dict:
                    "mechanisms": mechs, "unexplained": dg.get("unexplained", []),
                    "selection": {"criterion": "BIC with each channel's noise level profiled out", "steps": dg["steps"],
                                  **_selection_words(dg.get("selection_points"))},
+                   "refused_stand_ins": _refused(dg),
                    "channels": chans, "comparison": dg["comparison"],
                    "parameters": {k: {"value": fit.ls.values[k], "std": fit.ls.std[k],
                                       "identifiable": fit.ls.identifiable[k],

@@ -19,6 +19,9 @@ one: :func:`complementary`):
   and a per-sample test would call a run-to-run accident evidence.  z below
   :data:`TIE_Z` is a tie.  Vuong, Econometrica 57 (1989) 307-333, for non-nested
   models; clustered by run as in Cameron & Miller, J. Human Resources 50 (2015) 317.
+
+On an operating-point table (a loss map) the points are the units (:func:`point_vuong_z`): each
+is its own steady test, averaged over many samples.
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ TIE_Z = 2.0
 #: runs (holding data) below which the runs cannot judge (z could not reach TIE_Z unless nearly
 #: every run agreed; a log of one set point is one run): the fixed rule decides alone
 MIN_RUNS = 10
+#: points (holding data) below which a table's points cannot judge; the fixed rule decides alone
+MIN_POINTS = 10
 
 
 def chi2_by_run(fit, dataset, screen=None) -> np.ndarray | None:
@@ -66,6 +71,27 @@ def run_vuong_z(first, second, dataset, screen=None) -> float | None:
     if a is None or b is None or a.shape != b.shape or np.count_nonzero((a > 0) | (b > 0)) < MIN_RUNS:
         return None
     d = b - a
+    scale = float(np.sqrt(np.sum(d * d)))
+    return float(np.sum(d) / scale) if scale > 0 else None
+
+
+def point_vuong_z(first, second, sigma: dict) -> float | None:
+    """z of "table fit ``first`` fits the points better than table fit ``second``", the points as units
+    (module doc), each point's χ² summed over its channels in one noise (``sigma``: channel → σ per
+    point, the current model's); None where fewer than :data:`MIN_POINTS` points hold data in both or
+    the two fit every point alike."""
+    d, seen = None, None
+    for c, s in sigma.items():
+        r1, r2 = first.table_residuals.get(c), second.table_residuals.get(c)
+        if r1 is None or r2 is None:
+            continue
+        r1, r2, s = (np.asarray(x, dtype=float) for x in (r1, r2, s))
+        ok = np.isfinite(r1) & np.isfinite(r2) & np.isfinite(s) & (s > 0)
+        term = np.where(ok, (np.where(ok, r2, 0.0) ** 2 - np.where(ok, r1, 0.0) ** 2) / np.where(ok, s, 1.0) ** 2,
+                        0.0)
+        d, seen = (term, ok) if d is None else (d + term, seen | ok)
+    if d is None or int(np.count_nonzero(seen)) < MIN_POINTS:
+        return None
     scale = float(np.sqrt(np.sum(d * d)))
     return float(np.sum(d) / scale) if scale > 0 else None
 

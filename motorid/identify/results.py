@@ -63,6 +63,12 @@ def result_document(ls: FitResult, spec, dataset=None, bayes=None, inputs: dict 
             # Student-t where the standard error rests on the few breakaway events (interval_dof)
             half = interval_factor(dof.get(k, float("inf"))) * ls.std[k]
             entry["ci95"] = [ls.values[k] - half, ls.values[k] + half]
+            if info.positive and entry["ci95"][0] <= 0:
+                # a positive parameter ends at 0: the interval is cut there, and said to reach it
+                entry["ci95"][0] = 0.0
+                entry["indistinct_from_zero"] = True
+                entry["note"] = ("its 95 % interval reaches 0 (cut there: the parameter is positive): these data "
+                                 "do not tell it from zero")
             if np.isfinite(dof.get(k, float("inf"))):
                 entry["dof"] = dof[k]
             visc = getattr(ls, "covariance_viscosity", None)

@@ -60,6 +60,7 @@ td.num { text-align: right; white-space: nowrap; font-variant-numeric: tabular-n
 tr.no td { background: #fff4f2; }
 td.no { color: #b3261e; }
 td.yes { color: #1a7f37; }
+td.weak { color: #9a6700; }
 figure { margin: 16px 0 28px; }
 figure img { max-width: 100%; height: auto; border: 1px solid #e4e7eb; }
 figcaption { color: #444; font-size: 0.9em; max-width: 1100px; }
@@ -320,7 +321,9 @@ def _parameters(rd: ReportData) -> str:
                 cells += ['<td colspan="3">—</td>']
         if truth:
             cells.append(_cell(k, "truth", truth.get(k), unit) if k in truth else "<td>—</td>")
-        if ident:
+        if ident and e.get("indistinct_from_zero"):
+            cells.append(f'<td class="weak">yes, but not told from 0: {esc(e.get("note", ""))}</td>')
+        elif ident:
             cells.append('<td class="yes">yes</td>')
         else:
             cells.append(f'<td class="no">no: {esc(e.get("reason", "not determined by these logs"))}</td>')

@@ -13,7 +13,8 @@ def format_fit(doc: dict) -> str:
     lines = [f"{'parameter':<8} {'value':>12} {'std':>10}  {'unit':<5} identifiable"]
     for k, e in doc["parameters"].items():
         if e["identifiable"]:
-            lines.append(f"{k:<8} {e['value']:>12.5g} {e['std']:>10.3g}  {e['unit']:<5} yes")
+            weak = ", but not told from 0 (95 % interval reaches it)" if e.get("indistinct_from_zero") else ""
+            lines.append(f"{k:<8} {e['value']:>12.5g} {e['std']:>10.3g}  {e['unit']:<5} yes{weak}")
         else:
             lines.append(f"{k:<8} {'—':>12} {'—':>10}  {e['unit']:<5} no: {e.get('reason', '')}")
     fit = doc["fit"]
