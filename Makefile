@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --dist worksteal  # two workers; an idle one takes tests from the busy one
 
-# every test, the slow concealed-campaign diagnoses (marker `slow`) included: about 4 minutes more
+# every test, the slow concealed-campaign diagnoses (marker `slow`) included: about 8 minutes more
 test-all: $(STAMP)
 	$(PY) -m pytest -q -n 2 --dist worksteal -m "slow or not slow"
 

@@ -8,6 +8,7 @@ from synthetic_data/concealed/ (truths in truths/, never given to the tool).
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from motorid.discrepancy.run_offsets import flow_balance
 from motorid.physics import registry as catalog
@@ -47,6 +48,7 @@ def test_the_mass_balance_shows_a_constant_zero_as_its_intercept_and_does_not_ca
     assert abs(flow_balance(_load("causes_flow_meter_gain_a")[1])["mean_zero"]) < 0.1 * abs(c)
 
 
+@pytest.mark.slow  # a minute of diagnose: `make test-all`, and `make bench` (bench_causes scores the campaign too)
 def test_diagnose_names_a_case_meter_zero_not_its_gain_and_recovers_it_within_its_uncertainty():
     from motorid.discrepancy.select import diagnose, diagnosis_document
 

@@ -63,6 +63,7 @@ def campaign():
     return spec, ds, base, truth["mechanisms"]["inertia_error"]["dJ"]
 
 
+@pytest.mark.slow  # a minute of diagnose: `make test-all`, and `make bench` (bench_causes scores the campaign too)
 def test_the_inertia_error_is_told_from_its_torque_rivals_and_recovered_within_its_error(campaign):
     """The inertia error and the catalog's other torque ripples fitted on the same data, noise and
     outliers held as the base fit's (as diagnose compares them): only ΔJ takes the residual away,

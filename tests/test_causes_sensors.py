@@ -61,6 +61,7 @@ def test_a_lag_confined_to_the_fast_runs_is_located_at_its_size_there(lagged):
     assert slow.size and np.median(slow_amps) < 0.05 * s.effect
 
 
+@pytest.mark.slow  # a minute of diagnose: `make test-all`, and `make bench` (bench_causes scores the campaign too)
 def test_the_lag_is_placed_on_the_right_meter_and_recovers_tau(lagged):
     """A port-A lag and its rival fitted on the same data, noise and outliers held as the base fit's
     (as the discrepancy search compares them): the same lag on the port-B meter.  Only the port-A lag takes the structure away, with τ within 4σ of the truth.

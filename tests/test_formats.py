@@ -999,3 +999,86 @@ def test_a_matlab_char_matrix_reads_as_one_text_per_row(tmp_path):
     assert str(src.get("single")) == "abc"  # a row of chars is one text
     assert list(src.get("letters")) == ["x", "y"]  # a column of chars: one text per row
     src.close()
+
+
+def test_a_table_in_parquet_or_xlsx_with_the_formats_own_columns_needs_no_map(tmp_path):
+    """BENCH_LOG_FORMAT.md: a file with no time_s column is an operating-point table, whatever it is
+    written in.  A loss map saved by pandas as Parquet (pyarrow) and as .xlsx (openpyxl) is read as a
+    table — not refused as a log without time_s — and reads as its CSV twin; a Parquet log with time_s
+    stays a log."""
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.io.tables import read_tables, split_logs_and_tables
+    from motorid.model import MotorSpec, OilSpec
+
+    spec = MotorSpec("map-9", 9, 80e-6, 0.005, oil=OilSpec(temp_C=50.0))
+    truth = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.15,
+             "KL_b1": 0.08, "KAB": 2e-14}
+    df = simulate_map(spec, truth, map_grid([100, 1000], [50, 200], 2), rng=np.random.default_rng(0),
+                      noise={"torque_Nm": 0.3, "q_a_lpm": 0.05, "q_b_lpm": 0.05, "q_case_lpm": 0.02})
+    df.to_csv(tmp_path / "map.csv", index=False, float_format="%.17g")
+    df.to_parquet(tmp_path / "map.parquet", index=False)
+    df.to_excel(tmp_path / "map.xlsx", index=False, engine="openpyxl")
+    pd.DataFrame({"time_s": [0.0, 0.1], "speed_rpm": [1.0, 1.0]}).to_parquet(tmp_path / "log.parquet", index=False)
+    files = [tmp_path / n for n in ("map.parquet", "map.xlsx", "log.parquet")]
+    logs, tables = split_logs_and_tables(files)
+    assert tables == files[:2] and logs == files[2:]
+    want = read_tables([tmp_path / "map.csv"], spec)
+    for f in files[:2]:
+        got = read_tables([f], spec)
+        for c in ("torque", "q_a", "q_b", "q_case"):
+            np.testing.assert_allclose(got.measured[c], want.measured[c], rtol=1e-12, err_msg=f"{f.name} {c}")
+        np.testing.assert_allclose(got.speed, want.speed, rtol=1e-12)
+
+
+def test_a_makers_wide_data_sheet_reads_through_a_grid_of_its_rows_columns_and_cells(tmp_path):
+    """A data sheet as makers print it — rows of pressure, a header row of speeds, a block of torques (one
+    sheet), flows on a second sheet — read through [grid] with "@rows", "@columns", "@cells" (a sheet
+    named before '!'), gives the long table's points; a header that is no number and a text cell are
+    refused in one line naming them."""
+    from motorid.bench.maps import map_grid, simulate_map
+    from motorid.io.tables import read_tables
+    from motorid.model import MotorSpec, OilSpec
+
+    spec = MotorSpec("map-9", 9, 80e-6, 0.005, oil=OilSpec(temp_C=50.0))
+    truth = {"Kv": 5000.0, "KF": 3e-3, "KFS": 1.5e-2, "TFc": 3.0, "Ks": 1.0, "KL0": 5e-14, "KL_a1": 0.15,
+             "KL_b1": 0.08, "KAB": 2e-14}
+    speeds, dps = [500, 1000, 2000], [50, 100, 200, 300]
+    long = simulate_map(spec, truth, map_grid(speeds, dps, 1), rng=np.random.default_rng(0),
+                        noise={"torque_Nm": 0.3, "q_a_lpm": 0.05, "q_b_lpm": 0.05, "q_case_lpm": 0.02})
+    long = long.assign(dp=long.p_a_bar - long.p_b_bar).sort_values(["dp", "speed_rpm"])
+    wide = {c: long.pivot(index="dp", columns="speed_rpm", values=c) for c in ("torque_Nm", "q_a_lpm")}
+    sheet = lambda c: wide[c].rename(columns=lambda v: f"{v:g}").rename_axis("p [bar]").reset_index()  # noqa: E731
+    sheet("torque_Nm").to_csv(tmp_path / "torque.csv", index=False)
+    with pd.ExcelWriter(tmp_path / "sheet.xlsx", engine="openpyxl") as book:
+        sheet("torque_Nm").to_excel(book, sheet_name="Torque", index=False)
+        sheet("q_a_lpm").to_excel(book, sheet_name="Flow", index=False)
+    grid = '[constants]\noil_temp_C = 50.0\n[grid]\naxes = ["dp_bar", "speed_rpm"]\n'
+    (tmp_path / "torque.channels.toml").write_text(
+        grid + '[channels]\ndp_bar = {name = "@rows", unit = "bar"}\nspeed_rpm = {name = "@columns", unit = "rpm"}\n'
+        'torque_Nm = {name = "@cells", unit = "N*m"}\n')
+    (tmp_path / "sheet.channels.toml").write_text(
+        '[file]\nsheet = "*"\n' + grid + '[channels]\ndp_bar = {name = "Torque!@rows", unit = "bar"}\n'
+        'speed_rpm = {name = "Torque!@columns", unit = "rpm"}\ntorque_Nm = {name = "Torque!@cells", unit = "N*m"}\n'
+        'q_a_lpm = {name = "Flow!@cells", unit = "l/min"}\n')
+    for name, channels in (("torque.csv", ("torque",)), ("sheet.xlsx", ("torque", "q_a"))):
+        t = read_tables([tmp_path / name], spec)
+        assert len(t) == len(long)
+        order = np.lexsort((t.speed, t.dp))
+        np.testing.assert_allclose(t.speed[order] * 30 / np.pi, long.speed_rpm, rtol=1e-12)
+        np.testing.assert_allclose(t.dp[order] * 1e-5, long.dp, rtol=1e-12)
+        np.testing.assert_allclose(t.measured["torque"][order], long.torque_Nm, rtol=1e-9)
+        if "q_a" in channels:
+            np.testing.assert_allclose(t.measured["q_a"][order] * 6e4, long.q_a_lpm, rtol=1e-9)
+    bad = sheet("torque_Nm").rename(columns={"1000": "1000 rpm"})
+    bad.to_csv(tmp_path / "torque.csv", index=False)
+    with pytest.raises(InputError, match=r"torque\.csv: header '1000 rpm' of the wide sheet is not a number"):
+        read_tables([tmp_path / "torque.csv"], spec)
+    bad = sheet("torque_Nm").astype(object)
+    bad.iloc[2, 2] = "n.a."
+    bad.to_csv(tmp_path / "torque.csv", index=False)
+    with pytest.raises(InputError, match=r"torque\.csv: wide sheet, column '1000', row 3: 'n\.a\.' is not a number"):
+        read_tables([tmp_path / "torque.csv"], spec)
+    # without a map, the refusal says what the sheet looks like and how to read it
+    sheet("torque_Nm").to_csv(tmp_path / "plain.csv", index=False)
+    with pytest.raises(InputError, match=r"plain\.csv: missing required column 'speed_rpm'.*a wide data sheet.*@cells"):
+        read_tables([tmp_path / "plain.csv"], spec)

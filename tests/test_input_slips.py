@@ -54,6 +54,14 @@ def test_a_channel_with_no_points_left_for_its_noise_is_refused_and_a_few_more_a
     assert all(fit.ls.std[k] > 0 for k in ("Kv", "KF", "TFc"))
     whole = fit_table(read_table(_csv(d, df, "all.csv"), spec), spec)  # 36 points: no such word
     assert not any("degrees of freedom" in w for w in whole.ls.warnings)
+    # two points: nothing to identify — refused, not a result.json of "not identifiable" rows (the
+    # reasons saying how many readings there are, not that the column is missing)
+    with pytest.raises(InputError, match=r"two\.csv: 2 points: too few to identify any parameter"):
+        fit_table(read_table(_csv(d, spread.iloc[:2], "two.csv"), spec), spec)
+    from motorid.identify.tables import table_coverage_reasons
+
+    words = table_coverage_reasons(read_table(d / "two.csv", spec), spec, ["Kv", "KL0"])
+    assert words["Kv"].startswith("the table has only 2 torque readings") and "fewer than 3 points" in words["KL0"]
 
 
 def _csv(d, df, name):
@@ -82,10 +90,28 @@ def test_an_oil_temperature_under_a_benchs_own_name_is_read_and_one_without_unit
     with pytest.raises(InputError, match=r"column 'p_a_bara' is an absolute pressure; the columns are gauge: "
                                          r"read the file through a channel map"):
         read_table(_csv(d, hot.rename(columns={"p_a_bar": "p_a_bara"}), "abs.csv"), spec)
-    f = hot.assign(oil_temp_C=hot.oil_temp_C * 9 / 5 + 32)  # °F under a °C name
-    notes = read_table(_csv(d, f, "f.csv"), spec).notes
-    assert any("oil at 122 °C in the median" in n and "oil_temp_F" in n for n in notes), notes
-    assert not any("hotter than" in n for n in read_table(d / "own.csv", spec).notes)
+    f = hot.assign(oil_temp_C=hot.oil_temp_C * 9 / 5 + 32)  # °F under a °C name: K_v 7× off, refused
+    with pytest.raises(InputError, match=r"f\.csv: column 'oil_temp_C': oil at 122 °C in the median.*oil_temp_F"):
+        read_table(_csv(d, f, "f.csv"), spec)
+    # oil that truly runs this hot is read where its viscosity is given; the same column as °F reads as °C
+    mu = read_table(d / "own.csv", spec).viscosity
+    assert np.median(read_table(_csv(d, f.assign(viscosity_mPas=1e3 * mu), "hot.csv"), spec).temperature) > 110
+    np.testing.assert_allclose(read_table(_csv(d, f.rename(columns={"oil_temp_C": "oil_temp_F"}), "fahrenheit.csv"),
+                                          spec).temperature, want)
+
+
+def test_a_logs_oil_temperature_in_fahrenheit_under_a_celsius_name_is_refused(tmp_path):
+    """The same slip on a bench log (read through a channel map, as a DAQ file is): refused in one line
+    naming the file, where the viscosity is to come from the temperature."""
+    from motorid.io.logs import read_logs
+    from motorid.io.spec import load_motor_spec
+
+    df = pd.read_csv(REPO / "synthetic_data" / "demo" / "campaign.csv.gz", nrows=2000)
+    df = df.drop(columns=["viscosity_mPas"]).assign(oil_temp_C=lambda f: (f.oil_temp_C + 20) * 9 / 5 + 32)
+    df.to_csv(tmp_path / "log.csv", index=False)
+    spec = load_motor_spec(REPO / "synthetic_data" / "demo" / "motor.toml")
+    with pytest.raises(InputError, match=r"log\.csv: column 'oil_temp_C': oil at 1\d\d °C in the median"):
+        read_logs([tmp_path / "log.csv"], spec)
 
 
 def test_an_efficiency_sheet_in_motor_mode_alone_says_it_cannot_check_the_signs(made):

@@ -156,6 +156,8 @@ def test_the_mbari_recordings_fit_as_they_were_written_and_predict_held_out_poin
     for k in ("Kv", "KF", "TFc"):
         assert doc["parameters"][k]["identifiable"]
     assert any("no case pressure" in w for w in doc["fit"]["warnings"])
+    # no startability run among the recordings: said in the logs' words, not a table's
+    assert doc["parameters"]["KFS"]["reason"].startswith("these logs hold no startability run")
     models = doc["comparison"]["models"]
     others = {k: v for k, v in models.items() if not k.startswith("motorid")}  # the classical models
     ours = models["motorid"]

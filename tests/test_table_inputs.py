@@ -184,6 +184,8 @@ def test_predict_says_where_it_cannot_or_where_it_extrapolates(made, monkeypatch
     assert "not that of a motor or a pump" in pred.loc["idle", "note"]
     assert pred.loc["inside", "note"] == "" and 0 < pred.loc["inside", "overall_efficiency"] < 1
     assert "extrapolated: |ΔP| 600 bar outside the fitted 50-250 bar" in pred.loc["high", "note"]
+    # and it says what its bands there cannot know: how the model error grows outside the range
+    assert pred.loc["high", "note"].endswith("its bands take the model error at its size inside the fitted range")
 
 
 @pytest.mark.parametrize("edit,words", [

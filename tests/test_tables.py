@@ -377,6 +377,8 @@ def test_kfold_machinery_on_a_known_answer():
 @pytest.mark.parametrize("edit,words", [
     (lambda df: df.drop(columns=["speed_rpm"]), "'speed_rpm'"),
     (lambda df: df.assign(torque_Nm=df.torque_Nm.astype(object).where(df.index != 3, "n/a?")), "'torque_Nm', line 5"),
+    (lambda df: df.assign(p_a_bar=df.p_a_bar.where(df.index != 2, np.inf)), "'p_a_bar', line 4: 'inf' is no reading"),
+    (lambda df: df.iloc[:2], "2 points: too few to identify any parameter"),
 ])
 def test_bad_table_one_line_exit_2(tmp_path, capsys, edit, words):
     from motorid.cli import main

@@ -103,6 +103,8 @@ def _one_pressure_campaign(truth: dict, seed: int):
     return extract(frame, spec), spec
 
 
+@pytest.mark.slow  # a minute of diagnose: `make test-all` and `make bench` (bench_mapphysics scores it too; its
+# loss-map twin below stays in `make test`)
 def test_a_stribeck_curve_seen_at_one_pressure_is_not_named_mixed_lubrication():
     """Seed 5041 of bench_mapphysics: mixed lubrication beat the true Stribeck curve by Δχ² 14
     (the fixed rule's 10 passed); run by run the two differ by noise (z ≈ 0.7)."""

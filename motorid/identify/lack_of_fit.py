@@ -171,6 +171,7 @@ def model_error_warnings(errors: dict) -> list:
             unit, f = ("N·m", 1.0) if c == "torque" else ("L/min", LPM_PER_M3S)
             out.append(f"the model misses the table's {words} by structure, not noise: neighbouring points share "
                        f"{e['sigma'] * f:.3g} {unit} RMS of their residuals ({100 * e['share']:.0f} % of the scatter "
-                       "about the model); the fitted values carry it, predict's confidence bands include it, and "
+                       "about the model); the fitted values carry it, predict's confidence bands include it within the "
+                       "fitted range (where predict extrapolates, at its size there: it may grow outside), and "
                        "`motorid diagnose` looks for what the model lacks")
     return out

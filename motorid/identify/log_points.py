@@ -467,8 +467,12 @@ class LogPoints:
 
     def reasons(self) -> dict:
         """Why a parameter is not identified, in the words of these logs (replacing a table's)."""
-        return {k: ("these logs hold no shaft angle: they are fitted as operating points (means over the shaft "
-                    "angle), and the K_L(θ) harmonics need flows recorded against it") for k in ("KL_a", "KL_b")}
+        out = {k: ("these logs hold no shaft angle: they are fitted as operating points (means over the shaft "
+                   "angle), and the K_L(θ) harmonics need flows recorded against it") for k in ("KL_a", "KL_b")}
+        if not self.startability_runs:  # not "an operating-point table": the user gave logs
+            out.update({k: ("these logs hold no startability run (ISO 4392-2) with a breakaway: static friction "
+                            "needs one") for k in ("KFS", "Ks")})
+        return out
 
 
 #: the reason extract gives a running run that has no shaft angle (identify/steady.py)

@@ -346,7 +346,8 @@ def _outside(doc: dict, table) -> dict:
         for i in np.flatnonzero((where != "") & ~np.isin(where, seen)):
             part = f"{where[i]}, a quadrant the fit never saw (it saw {'; '.join(seen)})"
             out[int(i)] = (out[int(i)] + ", " if int(i) in out else "extrapolated: ") + part
-    return out
+    # a model error measured inside the fitted range may grow outside it (a leak steeper than the model's)
+    return {i: w + "; its bands take the model error at its size inside the fitted range" for i, w in out.items()}
 
 
 def write_predictions(frame: pd.DataFrame, path) -> Path:

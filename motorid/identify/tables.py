@@ -65,8 +65,11 @@ def table_coverage_reasons(table, spec, names: Sequence[str]) -> dict:
     reasons = {}
     tq = np.isfinite(m["torque"])
     if tq.sum() < 3:
+        words = ("the table has no torque readings" if not tq.any() else
+                 f"the table has only {int(tq.sum())} torque reading{'s' * int(tq.sum() != 1)} (K_v, K_F and T_Fc "
+                 "need 3, and one more for the torque's noise)")
         for k in ("Kv", "KF", "TFc"):
-            reasons[k] = "the table has no torque column (or fewer than 3 torque readings)"
+            reasons[k] = words
     else:
         if relative_spread(np.abs(table.viscosity * table.speed)[tq]) < 0.05:
             reasons["Kv"] = ("torque at a single speed·viscosity level: viscous and Coulomb friction cannot be "
@@ -80,7 +83,8 @@ def table_coverage_reasons(table, spec, names: Sequence[str]) -> dict:
     if (flows["q_case"] | port).sum() < 3:
         # a port flow alone also carries K_L0 (its port's leakage to the case): whether it tells
         # K_L0 from K_AB is the data's to say (the null space of the fit), not a rule's
-        reasons["KL0"] = "the table has no flow column (or fewer than 3 flow readings)"
+        reasons["KL0"] = ("the table has no flow readings" if not (flows["q_case"] | port).any() else
+                          "the table has fewer than 3 points with flow readings")
     if port.sum() < 3:
         reasons["KAB"] = "the table has no port flow (K_AB shows only in the port flows)"
     elif np.all(np.abs(table.dp[port]) < 1e3):
@@ -238,6 +242,11 @@ def fit_table(table, spec, mechanisms: Sequence = (), dataset=None, log_fit: Fit
     free = [k for k in names if k not in reasons]
     has = {c: np.isfinite(table.measured[c]) & train for c in TABLE_CHANNELS}
     whole = bool(np.all(train))  # not a fold's training points (a fold too small is the comparison's to say)
+    if whole and dataset is None and not any(k in free for k in ("Kv", "KF", "TFc", "KL0", "KAB")):
+        n = len(table)
+        raise InputError(f"{_table_files(table)}: {n} point{'s' * (n != 1)}: too few to identify any parameter "
+                         "(a fit needs at least 4 points with torque, for K_v, K_F, T_Fc and the torque's noise, "
+                         "or at least 3 with flows)")
     rough: set = set()
     sigma_c = {c: initial_sigma(table.measured[c][has[c]]) for c in TABLE_CHANNELS}
     if fixed_noise:

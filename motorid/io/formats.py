@@ -57,16 +57,64 @@ def _not_found(path, name: str, names) -> InputError:
     return InputError(f"{path}: no channel '{name}' (the file has: {listing or 'none'})")
 
 
-class _Columns:
-    """A tabular source: a DataFrame whose columns are the channels."""
+#: channel names that read a wide sheet (a maker's data-sheet matrix) under a [grid]: its first column,
+#: the numbers of its header row after it, and the block of cells under them
+WIDE_PARTS = ("@rows", "@columns", "@cells")
 
-    def __init__(self, path, frame: pd.DataFrame, where: str = ""):
+
+class _Columns:
+    """A tabular source: a DataFrame whose columns are the channels (or, by :data:`WIDE_PARTS`,
+    a wide sheet's axes and cells)."""
+
+    def __init__(self, path, frame: pd.DataFrame, where: str = "", sheets: bool = False):
         self.path, self.frame, self.where = path, frame, where
+        self.sheets = sheets  # a workbook's: its frame's "sheet" column names each row's sheet
 
     def names(self):
         return [str(c) for c in self.frame.columns]
 
+    def _wide(self, sheet: str | None, part: str) -> np.ndarray:
+        """``part`` of a wide sheet (``sheet``: one of a workbook's sheets, else the whole table): the
+        first column ("@rows"), the numbers of the header row after it ("@columns"), the cells under them
+        ("@cells", rows × columns); empty rows and columns left out."""
+        frame = self.frame
+        if sheet is not None:
+            if not self.sheets:
+                raise InputError(f"{self.path}: '{sheet}!{part}' names a sheet, and only a workbook has sheets")
+            frame = frame[frame["sheet"].astype(str) == sheet]
+            if frame.empty:
+                raise InputError(f"{self.path}: no sheet '{sheet}' among those read ({self.where}; read several "
+                                 "with [file] sheet = \"*\")")
+        if self.sheets:
+            frame = frame.drop(columns=["sheet"])
+        frame = frame.dropna(axis=1, how="all").dropna(axis=0, how="all")
+        cols = list(frame.columns)
+        if len(cols) < 2 or frame.empty:
+            raise InputError(f"{self.path}: a wide sheet ({part}) needs a first column of one axis and at least one "
+                             "column headed by a value of the other")
+        if part == "@columns":
+            values = []
+            for c in cols[1:]:
+                try:
+                    values.append(float(str(c).replace(",", ".")))
+                except ValueError:
+                    raise InputError(f"{self.path}: header '{c}' of the wide sheet is not a number (@columns: the "
+                                     "header row after the first column holds the other axis' values)") from None
+            return np.asarray(values)
+        block = frame[cols[:1]] if part == "@rows" else frame[cols[1:]]
+        numbers = block.apply(pd.to_numeric, errors="coerce")
+        text = block.notna().to_numpy() & numbers.isna().to_numpy()
+        if text.any():
+            i, j = (int(k[0]) for k in np.nonzero(text))
+            raise InputError(f"{self.path}: wide sheet, column '{block.columns[j]}', row {i + 1}: "
+                             f"'{block.iloc[i, j]}' is not a number")
+        out = numbers.to_numpy(dtype=float)
+        return out[:, 0] if part == "@rows" else out
+
     def get(self, name: str):
+        head, bang, tail = name.rpartition("!")
+        if tail.strip() in WIDE_PARTS:
+            return self._wide(head.strip() if bang else None, tail.strip())
         if name not in self.frame.columns:
             matches = [c for c in self.frame.columns if str(c).strip() == name.strip()]
             if len(matches) != 1:
@@ -106,7 +154,8 @@ def _workbook(path: Path, options: dict) -> _Columns:
                 frame[col] = _comma_numbers(frame[col])
     label = ", ".join(str(f["sheet"].iloc[0]) if len(f) else "?" for f in frames)
     return _Columns(path, frame, where=f"sheet {label}" + ("" if len(names) == 1 else
-                                                           f"; the workbook's sheets: {', '.join(names)}"))
+                                                           f"; the workbook's sheets: {', '.join(names)}"),
+                    sheets=True)
 
 
 def _comma_numbers(column: pd.Series) -> pd.Series:
@@ -721,6 +770,31 @@ def open_source(path, cmap=None, stream: bool = False):
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"{path}: cannot read as {fmt} with {_LIBRARY[fmt]} ({msg})") from None
     raise InputError(f"{path}: format '{fmt}' has no reader")  # pragma: no cover
+
+
+def column_names(path) -> list | None:
+    """The column names of a tabular binary file (Parquet: its schema; Excel: the first row of its
+    first sheet), read without its data; None for any other format, or where the file cannot be read
+    (its reader then says why)."""
+    path = Path(path)
+    fmt = SUFFIXES.get(_suffix(path))
+    try:
+        if fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            return [str(n) for n in pq.read_schema(str(path)).names]
+        if fmt == "xlsx":
+            import openpyxl
+
+            book = openpyxl.load_workbook(path, read_only=True, data_only=True)
+            try:
+                first = next(book.worksheets[0].iter_rows(max_row=1, values_only=True), ())
+            finally:
+                book.close()
+            return [str(v) for v in first if v is not None]
+    except Exception:  # noqa: BLE001 — not readable here: the reader of the file says what is wrong
+        return None
+    return None
 
 
 # --------------------------------------------------------------------------- to the log reader

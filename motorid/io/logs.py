@@ -28,6 +28,26 @@ VISCOSITY_FROM_OIL = "viscosity_from_oil_model"  # frame column: True where μ c
 TEMPERATURE_ASSUMED = "oil_temp_assumed"  # frame column: True where the spec's [oil] temp_C stood for the log's
 
 
+#: a median oil temperature above this [°C], where the viscosity is to come from it, is refused as a
+#: probable °F column (mineral hydraulic oil runs below about 90 °C; ISO 4409 tests at 50 °C): 50 °C
+#: read as 122 "°C" gives a viscosity 7× too low, and K_v 7× too high with exit 0
+HOT_OIL_C = 110.0
+
+
+def refuse_fahrenheit_as_celsius(where: str, column: str, temperature, derived) -> None:
+    """One line where the oil temperatures from which viscosities are ``derived`` (a mask over
+    ``temperature`` [°C]) lie above :data:`HOT_OIL_C` in the median: °F read as °C, most likely.
+    Oil that truly runs this hot is read with its viscosity given (``viscosity_mPas``)."""
+    t = np.asarray(temperature, dtype=float)[np.asarray(derived, bool)]
+    t = t[np.isfinite(t)]
+    if not t.size or float(np.median(t)) <= HOT_OIL_C:
+        return
+    hot = float(np.median(t))
+    raise InputError(f"{where}: column '{column}': oil at {hot:.0f} °C in the median, hotter than hydraulic oil "
+                     f"is run: °F under a °C name ({(hot - 32) * 5 / 9:.0f} °C if so)? Name the column oil_temp_F "
+                     f"(in a channel map: unit = \"F\"); oil truly this hot: give its viscosity too (viscosity_mPas)")
+
+
 def assumed_temperature(temp, mu, oil, where: str):
     """A log (or a block of one) that holds neither an oil temperature nor a viscosity takes the spec's
     [oil] temp_C for every sample → (temperatures [°C], assumed: bool); one line where the spec has none."""
@@ -490,6 +510,8 @@ def read_log(path, spec=None, channels=None) -> pd.DataFrame:
                              f"table is needed for the density")
         mu = oil.dynamic_from_kinematic(nu, temp)
     gaps = np.isnan(mu)
+    if gaps.any() and not assumed:
+        refuse_fahrenheit_as_celsius(str(path), col("oil_temp_C"), temp, gaps)
     if gaps.any():
         if oil is None:
             if "viscosity_Pa_s" not in found or gaps.all():

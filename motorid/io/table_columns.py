@@ -53,18 +53,25 @@ def _head_text(path: Path, size: int = 65536) -> str:
 def is_table(path) -> bool:
     """True when ``path`` is an operating-point table: its header has no time column.
 
-    Only the file's head is read; a file whose head is not text is not a table (the log
-    reader then says what is wrong with it)."""
+    Only the file's head is read (of a Parquet file its schema, of a workbook its first row:
+    :func:`~motorid.io.formats.column_names`); a file whose head is not text, and which is not one of
+    those, is not a table (the log reader then says what is wrong with it)."""
+    from motorid.io.formats import column_names
+
     path = Path(path)
-    try:
-        text = _head_text(path)
-    except OSError:
-        return False
-    if not text or "\x00" in text:
-        return False
-    try:
-        fields = _split_header(path, text)[0]
-    except InputError:
+    fields = column_names(path)
+    if fields is None:
+        try:
+            text = _head_text(path)
+        except OSError:
+            return False
+        if not text or "\x00" in text:
+            return False
+        try:
+            fields = _split_header(path, text)[0]
+        except InputError:
+            return False
+    if not fields:
         return False
     for name in fields:
         norm = normalize_header(name)
@@ -72,6 +79,14 @@ def is_table(path) -> bool:
             return False
         if norm in ("run_id", "runid", "protocol"):  # a bench log that lost its time column: the log
             return False                             # reader names what is missing
+    return True
+
+
+def _is_number(text) -> bool:
+    try:
+        float(str(text).strip().replace(",", "."))
+    except ValueError:
+        return False
     return True
 
 
@@ -131,8 +146,13 @@ def _map_table_columns(path: Path, fields: list):
                 f"column '{name}' seems to be the {q.words}, but its unit suffix is not one motorid knows (such as "
                 f"{q.hint}): rename it, or read the file with a channel map")))
     if "speed_rad_s" not in found:
+        wide = ""
+        if sum(_is_number(f) for f in fields[1:]) >= 2:  # a header row of speeds: a maker's data-sheet matrix
+            wide = ("; its header holds numbers: a wide data sheet (one axis down the first column, the other along "
+                    "the header) reads through a channel map's [grid] with names \"@rows\", \"@columns\", "
+                    "\"@cells\" (docs/formats.md)")
         raise InputError(f"{path}: missing required column 'speed_rpm' (shaft speed, any unit suffix such as "
-                         f"_rpm, _rad_s)")
+                         f"_rpm, _rad_s){wide}")
     has_ports = "p_a_Pa" in found and "p_b_Pa" in found
     if not has_ports and "dp_Pa" not in found:
         missing = "p_b_bar" if "p_a_Pa" in found else "p_a_bar"

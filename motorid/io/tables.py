@@ -23,13 +23,10 @@ import numpy as np
 
 from motorid.errors import InputError
 from motorid.io.efficiency_columns import outputs_from_efficiencies, outputs_from_losses
-from motorid.io.logs import _BY_SI, _PRESSURE_UNITS, _oil_viscosity, _parse_body, _split_header
+from motorid.io.logs import (_BY_SI, _PRESSURE_UNITS, _oil_viscosity, _parse_body, _split_header,
+                             refuse_fahrenheit_as_celsius)
 from motorid.io.table_columns import (_DISPLACEMENT_UNITS, OUTPUTS, _head_text, _header_fields,  # noqa: F401
                                       _map_table_columns, is_table)
-
-#: a median oil temperature above this [°C] is told as a probable °F column (mineral hydraulic oil runs
-#: below about 90 °C; ISO 4409 tests at 50 °C)
-HOT_OIL_C = 110.0
 
 #: below this |speed| a point is at rest [rad/s] (0.01 rpm)
 STALL_SPEED = 1e-3
@@ -154,7 +151,9 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
         x, j, _ = column(key)
         bad = np.flatnonzero(~np.isfinite(x))
         if bad.size:
-            raise InputError(f"{path}: column '{fields[j]}', line {lines[bad[0]]}: empty cell (required)")
+            raw = table[j].iloc[bad[0]]
+            what = "empty cell" if not np.isinf(raw) else f"'{raw:g}' is no reading"
+            raise InputError(f"{path}: column '{fields[j]}', line {lines[bad[0]]}: {what} (required)")
         return x
 
     def convert(key, x):
@@ -177,18 +176,15 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
                              f"with absolute = true)")
 
     temperature = np.full(n, np.nan)
-    hot_note = None
     if "oil_temp_C" in found:
         temperature = convert("oil_temp_C", column("oil_temp_C")[0])
         if np.any(temperature < -273.15):
             i = int(np.flatnonzero(temperature < -273.15)[0])
             raise InputError(f"{path}: column '{fields[found['oil_temp_C'][0]]}', line {lines[i]}: "
                              f"temperature below absolute zero")
-        hot = float(np.nanmedian(temperature)) if np.isfinite(temperature).any() else np.nan
-        if hot > HOT_OIL_C:  # a °F column under a °C name reads 50 °C as 122 °C, a viscosity 7× too low
-            hot_note = (f"column '{fields[found['oil_temp_C'][0]]}': oil at {hot:.0f} °C in the median, hotter than "
-                        f"hydraulic oil is run; if the column is in °F ({(hot - 32) * 5 / 9:.0f} °C), name it "
-                        "oil_temp_F")
+        if "viscosity_Pa_s" not in found:  # °F under a °C name: a viscosity 7× too low, refused
+            refuse_fahrenheit_as_celsius(str(path), fields[found["oil_temp_C"][0]], temperature,
+                                         np.ones(n, bool))
     mu = np.full(n, np.nan)
     oil = getattr(spec, "oil", None)
     if "viscosity_Pa_s" in found:
@@ -272,7 +268,7 @@ def read_table(path, spec=None, require_outputs: bool = True) -> PointTable:
     else:
         ids = np.array([f"{path.name}:{k}" for k in lines], dtype=object)
         has_id = False
-    notes = [] if hot_note is None else [f"{path.name}: {hot_note}"]
+    notes = []
     if has_id and len(set(ids)) < ids.size:
         names, counts = np.unique(ids, return_counts=True)
         twice = [str(x) for x in names[counts > 1]]
