@@ -243,6 +243,23 @@ def test_a_law_in_no_catalog_is_left_unexplained_with_an_empirical_term_not_a_st
 
 
 @pytest.mark.slow  # a minute or more of diagnose: `make test-all` and `make bench`
+def test_a_cubic_torque_loss_is_not_named_churning_and_its_term_is_found():
+    """A torque loss ∝ ω³ (in no catalog) fits the churning law ∝ ω|ω| to a few per cent: on a
+    new user's bench it was named hydrodynamic_torque with K_v driven to 0.  With the speed split
+    of the region check on the running runs (and the shape check behind it) it is refused, nothing
+    is named, and the torque's empirical term is c·ω³ with the concealed c."""
+    name = "causes_extra_torque_cubic_speed"
+    doc = _diagnose(name)
+    c_true = _truth(name)["extra"]["torque_cubic_speed"]["c"]
+    assert doc["mismatch"] is True and doc["mechanisms"] == []
+    assert "hydrodynamic_torque" in {r["id"] for r in doc["refused_stand_ins"]}
+    torque = [u for u in doc["unexplained"] if u["channel"] == "torque"]
+    assert torque and "speed with the rotation's sign" in torque[0]["variables"]
+    coef = {t["term"]: t["coefficient"] for t in torque[0]["empirical_term"]["terms"]}
+    assert abs(coef["ω³"] + c_true) < 0.1 * c_true, torque[0]["empirical_term"]["formula"]
+
+
+@pytest.mark.slow  # a minute or more of diagnose: `make test-all` and `make bench`
 def test_two_causes_at_once_are_both_named_though_each_alone_fails_the_region_check():
     """A 2 % displacement error with Stribeck friction: with either alone in the model the
     other spoils the region splits, so the first is kept provisionally; asked again with the

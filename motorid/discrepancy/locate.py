@@ -7,7 +7,10 @@ should be white noise of unit variance.  Structure is looked for
   pressure difference, port-pressure sum, pressure to case, viscosity,
   temperature, protocol and the run itself — each run's mean normalized
   residual, with a standard error that allows for autocorrelation, tested
-  in groups along the variable (a χ² test of the group means);
+  in groups along the variable (a χ² test of the group means); for torque and
+  port flows also along |ω| with each run's mean taken with the sign of the
+  rotation, where runs turn both ways (a law of the speed reverses with the
+  rotation, and what it leaves cancels between the directions in the |ω| groups);
 - *within runs*: shaft angle at every shaft order k = 1 … K (not only the
   piston orders; only in runs whose sampling resolves that order) and time
   within the run (a linear and a quadratic trend) — a χ² test of the
@@ -29,7 +32,13 @@ import numpy as np
 from scipy.special import chdtrc  # the χ² survival function, without scipy.stats' second of import
 
 from motorid.discrepancy.run_segments import RunIndex, Segments
+from motorid.identify.types import RUNNING_PROTOCOLS
 from motorid.units import CHANNEL_WORDS, LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S, RUNNING_CHANNELS
+
+#: run means taken with the sign of the rotation, grouped by |ω|: what a law of the speed leaves
+SIGNED_SPEED = "speed with the rotation's sign"
+#: the channels whose laws of the speed reverse with the rotation (the case drain's does not)
+SIGNED_CHANNELS = ("torque", "q_a", "q_b")
 
 UNIT = {"torque": ("N·m", 1.0), "breakaway": ("N·m", 1.0), "q_a": ("L/min", LPM_PER_M3S),
         "q_b": ("L/min", LPM_PER_M3S), "q_case": ("L/min", LPM_PER_M3S)}
@@ -224,6 +233,14 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
         "temperature": _quantile_groups(runs["temp_median_C"].to_numpy(), 4, fmt=_degc),
         "protocol": _Labels(runs["protocol"].to_numpy(), list(dict.fromkeys(runs["protocol"].tolist()))),
     }
+    # a law of the speed reverses with the rotation (a friction, a swept flow): where the runs turn both
+    # ways, what such a law leaves cancels in the |ω| groups above; taken with the sign of the rotation
+    # it adds up (an ω³ torque loss fitted by a churning law ∝ ω|ω| left only a run-to-run spread)
+    turning = np.sign(runs["direction"].to_numpy(dtype=float))
+    running = runs["protocol"].isin(RUNNING_PROTOCOLS).to_numpy() & (turning != 0)
+    if (turning[running] > 0).sum() >= 2 and (turning[running] < 0).sum() >= 2:
+        speed = np.where(running, np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)), np.nan)
+        per_run[SIGNED_SPEED] = _quantile_groups(speed, 6, fmt=_rpm)
     # run-level medians of quantities not in the runs table
     for name, arr, fmt in (("pressure to case", np.asarray(s.p_case), _bar),
                            ("viscosity", np.asarray(s.viscosity), _mpas)):
@@ -252,13 +269,18 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
             for var, labels in list(per_run.items()) + [("run", _Labels(runs["run"].to_numpy(), runs["run"].tolist()))]:
                 if labels is None:
                     continue
+                sign = 1.0
+                if var == SIGNED_SPEED:
+                    if c not in SIGNED_CHANNELS:
+                        continue
+                    sign = turning
                 lab = _Labels(np.where(have, labels.values, None), labels.unique_order)
-                stat, dof, groups = _group_test(lab, np.where(have, zrun, np.nan), var)
+                stat, dof, groups = _group_test(lab, np.where(have, zrun * sign, np.nan), var)
                 if dof < 2 and var not in ("protocol",):
                     continue
                 glist = []
                 for name, zg, sel in groups:
-                    m = np.nanmean(mean_res[sel & have])
+                    m = np.nanmean((mean_res * sign)[sel & have])
                     glist.append((name, float(m), float(zg), float(np.nanmedian(noise_run[sel & have]))))
                 worst = max(glist, key=lambda g: abs(g[2]))
                 found.append(Structure(
@@ -287,6 +309,9 @@ def _words_between(c, var, worst, runs, have, labels) -> str:
         return f"{CHANNEL_WORDS[c]} in the {name} runs {verb} by {_fmt(abs(m), c)} on average"
     if var == "direction":
         return f"{CHANNEL_WORDS[c]} in {name} {verb} by {_fmt(abs(m), c)} on average"
+    if var == SIGNED_SPEED:
+        return (f"{CHANNEL_WORDS[c]} at speed {name}, taken with the sign of the rotation, {verb} by "
+                f"{_fmt(abs(m), c)} on average (the opposite way in the other direction)")
     return f"{CHANNEL_WORDS[c]} at {var} {name} {verb} by {_fmt(abs(m), c)} on average"
 
 

@@ -34,9 +34,9 @@ from motorid._aot import cached_jit, trim_heap
 from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT, Location, locate
 from motorid.discrepancy.screen import SCREEN_BINS_PER_PITCH, CellFit, Screen, thread_pool
 from motorid.discrepancy.tie import complementary, near_tie, run_vuong_z, tied
-from motorid.discrepancy.unexplained import extrapolation_check
-from motorid.discrepancy.verdicts import (LINEARITY_SHARE, caveats, refuse_cancelling_pair, ripple_gain_only,
-                                         transducer_like, widen_for_the_ripple_model)
+from motorid.discrepancy.unexplained import extrapolation_check, stand_ins_by_shape
+from motorid.discrepancy.verdicts import (LINEARITY_SHARE, caveats, refuse_by_shape, refuse_cancelling_pair,
+                                          ripple_gain_only, transducer_like, widen_for_the_ripple_model)
 from motorid.identify.least_squares import fit_least_squares
 from motorid.identify.types import FitOptions, FitResult
 from motorid.physics.registry import all_mechanisms
@@ -515,6 +515,16 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
     lap("final fit")
     loc_after = locate(final, dataset, spec, alpha=alpha, min_effect=min_effect) if accepted else loc0
     lap("locate structure (final)")
+    if accepted and loc_after.significant:
+        shaped = stand_ins_by_shape([c.mechanism for c in accepted], final, dataset, spec, loc_after.significant)
+        if shaped:  # a law of the wrong shape: what it leaves is said as unexplained, with the term for it
+            accepted = refuse_by_shape(accepted, shaped[0], refused, say)
+            current_mechs = [c.mechanism for c in accepted]
+            final = (fit_least_squares(dataset, spec, current_mechs, initial=final.params_all)
+                     if accepted else base)
+            lap("final fit")
+            loc_after = locate(final, dataset, spec, alpha=alpha, min_effect=min_effect) if accepted else loc0
+            lap("locate structure (final)")
     unexplained = list(loc_after.significant)
     detail = unexplained_entries(unexplained, final, dataset, spec) if unexplained else []
     lap("unexplained: words and empirical terms")

@@ -58,9 +58,15 @@ def _determined(values: dict, std: dict, mechanism) -> bool:
 
 def region_masks(dataset) -> dict:
     """Run-level halves: ``{(low words, high words): bool per run (True = low half)}``: speed, ΔP, oil temperature."""
+    from motorid.identify.types import RUNNING_PROTOCOLS
+
     runs = dataset.runs
     out = {}
-    moving = np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)) > 0
+    # running runs only: a startability run's creep (a few thousandths of an rpm as the shaft breaks
+    # away) had put the speed split at 0.007 rpm, so "fit on the low speeds, predict the high" fitted
+    # on the breakaways alone and the speed half of the check never counted
+    moving = runs["protocol"].isin(RUNNING_PROTOCOLS).to_numpy() & \
+        (np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)) > 0)
     for var, col, unit, f in (("speed", "speed_median_rad_s", "rpm", 60 / (2 * np.pi)),
                               ("pressure difference", "dp_median_Pa", "bar", 1e-5),
                               ("oil temperature", "temp_median_C", "°C", 1.0)):
@@ -210,3 +216,39 @@ def unexplained_entries(structures, final, dataset, spec, propose_terms: bool = 
                 entry["description"] += f". Proposed empirical term (not a named mechanism): {term.formula}"
         entries.append(entry)
     return entries
+
+
+def stand_ins_by_shape(accepted_mechanisms, final, dataset, spec, structures) -> list:
+    """Names whose law has not the shape of what they were named for (:func:`~motorid.discrepancy.
+    empirical.law_shape_check`), asked on each channel where the final fit leaves located structure
+    and a named mechanism acts → [(index in ``accepted_mechanisms``, channel, its check)], in order."""
+    from motorid import model
+    from motorid.discrepancy.empirical import law_shape_check
+
+    channels = [c for c in dict.fromkeys(s.channel for s in structures)
+                if c != "breakaway" and c in final.residuals]
+    out = []
+    if not channels or dataset.running is None:
+        return out
+    run_of = np.asarray(dataset.run_of_sample, dtype=int)
+    values = {k: float(v) for k, v in final.params_all.items()}
+    mechs = list(final.mechanisms)
+    for i, mech in enumerate(accepted_mechanisms):
+        acts = [c for c in channels if c in mech.channels]
+        if not acts:
+            continue
+        off = dict(values, **{k: float(v) for k, v in mech.neutral().items()})
+        with_it = model.predict(values, spec, dataset.running, mechs)
+        without = model.predict(off, spec, dataset.running, mechs)
+        for c in acts:
+            change = np.asarray(getattr(with_it, c)) - np.asarray(getattr(without, c))
+            ok = np.asarray(final.inliers[c]) & np.isfinite(final.residuals[c]) & np.isfinite(change)
+            if ok.sum() < 20 or not np.any(change[ok]):
+                continue
+            x = type(dataset.running)(*[np.asarray(f)[ok] if np.ndim(f) else f for f in dataset.running])
+            check = law_shape_check(c, x, np.asarray(final.residuals[c])[ok], change[ok],
+                                    np.asarray(final.sigma[c])[ok], run_of[ok], spec)
+            if check is not None and check["stand_in"]:
+                out.append((i, c, check))
+                break
+    return out

@@ -5,12 +5,36 @@ from __future__ import annotations
 
 import numpy as np
 
+from motorid.discrepancy.locate import CHANNEL_WORDS
 from motorid.identify.types import FitResult
 
 
 #: a displacement error and a torque gain whose sum is within this share of the displacement error cancel
 #: in the torque
 CANCELLING_SHARE = 0.25
+
+
+def refuse_by_shape(accepted, shaped, refused, say) -> list:
+    """Refuse the name whose law has not the shape of what it was named for (:func:`~motorid.discrepancy.unexplained.stand_ins_by_shape`),
+    and every name kept after it (chosen with it in the model) → the names kept."""
+    i, channel, check = shaped
+    cand = accepted[i]
+    gain = check["law_left"] - check["both_left"]
+    why = (f"its law has not the shape of what it was named for: in the {CHANNEL_WORDS[channel]}, the empirical "
+           f"term{'s' if len(check['terms']) > 1 else ''} {', '.join(check['terms'])} lower{'' if len(check['terms']) > 1 else 's'} "
+           f"the held-out χ² by {gain:.4g} beyond it, and beside {'them' if len(check['terms']) > 1 else 'it'} the law "
+           f"adds only {max(check['terms_left'] - check['both_left'], 0.0):.3g}: a stand-in for a law in no catalog")
+    say(f"refused {cand.mechanism.id}: {why}")
+    refused.append({"id": cand.mechanism.id, "why": why, "extrapolation": getattr(cand, "extrapolation", None),
+                    "shape_check": {"channel": channel, **check}})
+    for later in accepted[i + 1:]:
+        refused.append({"id": later.mechanism.id, "why": f"chosen after {cand.mechanism.id}, a refused stand-in, "
+                        "was in the model", "extrapolation": getattr(later, "extrapolation", None)})
+    for dropped in accepted[i:]:
+        if hasattr(dropped, "step_entry"):
+            dropped.step_entry["accepted"] = False
+            dropped.step_entry["refused_by_shape"] = True
+    return accepted[:i]
 
 
 def refuse_cancelling_pair(accepted, current, base, refused, say):

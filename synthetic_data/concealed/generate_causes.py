@@ -58,8 +58,14 @@ def _torque_order3_dp(f, c):
     return {"torque": c * (f["p_a_Pa"] - f["p_b_Pa"]) * np.cos(3.0 * f["theta_rad"] + 0.7)}
 
 
+def _torque_cubic_speed(f, c):
+    """A torque loss ∝ ω³, growing faster than the churning law ∝ ω|ω| (a drag no catalog law has):
+    T −= c·ω³ [N·m], c [N·m·s³]."""
+    return {"torque": -c * f["speed_rad_s"] ** 3}
+
+
 EXTRA = {"friction_inverse_viscosity": _friction_inverse_viscosity, "case_leak_pa_pb": _case_leak_pa_pb,
-         "torque_order3_dp": _torque_order3_dp}
+         "torque_order3_dp": _torque_order3_dp, "torque_cubic_speed": _torque_cubic_speed}
 
 # name: (pistons, seed, physics {mechanism: {parameter: value}}, transducers, extra {effect: size}
 #        [, protocol folder: default causes_protocols])
@@ -83,6 +89,7 @@ CASES = {
     "extra_case_leak_pa_pb": (9, 212, {}, {}, {"case_leak_pa_pb": 5e-20}),
     "extra_torque_order3_dp": (9, 213, {}, {}, {"torque_order3_dp": 2e-8}),
     "clean_9_seed214": (9, 214, {}, {}, {}),
+    "extra_torque_cubic_speed": (8, 221, {}, {}, {"torque_cubic_speed": 1e-7}),
     # transducer zeros that differ run to run (σ of the offset per channel, SI), alone and with small gains
     "per_run_offsets": (9, 215, {}, {"offset_sd": {"torque": 0.25, "q_a": 1e-6, "q_b": 1e-6}}, {}),
     "gains_and_offsets": (8, 216, {}, {"gain": {"torque": 0.004, "q_a": -0.005, "q_case": 0.01},
