@@ -353,6 +353,13 @@ def diagnose(logs: Sequence, motor, *, alpha: float = 1e-3, min_evidence: float 
     from motorid.identify.pipeline import Identification, add_fit_warnings
 
     final = add_fit_warnings(dg.final, dataset, frame)
+    left = sorted({u["channel"] for u in dg.unexplained_detail or []})
+    if left:  # a probe's friction ∝ ΔP²: K_FS −80σ, K_s +67σ in this result.json, and not a word there
+        from motorid.units import CHANNEL_WORDS
+
+        final.warnings.append(f"diagnose left structure unexplained in the {', '.join(CHANNEL_WORDS[c] for c in left)}"
+                              " (diagnosis.json → unexplained): these values are those of a model that misses "
+                              "it, and the parameters of those channels may be biased beyond their std")
     ident = Identification(final, None, dataset, frame, dg.seconds.get("final fit", 0.0), {})
     result.refit = _log_fit_result(ident, spec, logs, _motor_input(motor, motor_path), channels)
     return result

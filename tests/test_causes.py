@@ -216,24 +216,23 @@ def test_the_region_check_keeps_a_true_law_that_one_half_cannot_determine():
 @pytest.mark.slow  # a minute or more of diagnose: `make test-all` and `make bench`
 def test_a_law_in_no_catalog_is_left_unexplained_with_an_empirical_term_not_a_stand_in():
     """Friction ∝ sgn ω/μ (boundary friction as the oil thins) is in no catalog.  Case-pressure
-    friction fits it (the case pressure follows the drain flow, ∝ 1/μ) but does not predict the
-    other oil temperature: kept provisionally (structure is left), asked again with the final
-    model, refused; nothing is named, and the empirical term finds c/μ — with the default settings.
+    friction fits it (the case pressure follows the drain flow, ∝ 1/μ), and so, nearly as well, does
+    a churning law: the two tie on the runs (since the region check's speed split holds the running
+    runs; before, case-pressure friction was kept provisionally and refused on the other oil
+    temperature).  Nothing is named, and the empirical term finds c/μ — with the default settings.
     (Named causes: the campaigns of benchmarks/bench_causes.py; diagnose is too slow for more here.)"""
     name = "causes_extra_friction_inverse_viscosity"
     doc = _diagnose(name)
     c_true = _truth(name)["extra"]["friction_inverse_viscosity"]["c"]
     assert doc["mismatch"] is True and doc["mechanisms"] == []
-    assert any(r["id"] == "case_pressure_friction" for r in doc["refused_stand_ins"])
-    refused = next(r for r in doc["refused_stand_ins"] if r["id"] == "case_pressure_friction")
-    failed = [s for s in refused["extrapolation"]["splits"] if s["failed"]]
-    assert failed and all(s["determined"] for s in failed)  # refused where the half determines it
-    assert refused["extrapolation"]["with_the_final_model"] is True
-    kept_then_refused = [c for step in doc["selection"] for c in step if c.get("refused_after_recheck")]
-    assert [c["id"] for c in kept_then_refused] == ["case_pressure_friction"]
+    refused = [r for r in doc["refused_stand_ins"] if "case_pressure_friction" in r["id"]]
+    assert refused, doc["refused_stand_ins"]
+    if refused[0].get("tied"):  # the runs cannot tell it from the next stand-in: neither is named
+        assert "case_pressure_friction" in refused[0]["tied"]
+    else:  # refused where a training half determines it, far beyond what that half's uncertainty explains
+        failed = [s for s in refused[0]["extrapolation"]["splits"] if s["failed"]]
+        assert failed and all(s["determined"] and s["excess"] > 10 * s["expected_excess"] for s in failed)
     assert not any(c["accepted"] for step in doc["selection"] for c in step)  # the record agrees
-    # its excess is far beyond what the training half's uncertainty explains
-    assert all(s["excess"] > 10 * s["expected_excess"] for s in failed)
     torque = [u for u in doc["unexplained"] if u["channel"] == "torque"]
     assert torque and {"where", "p_value", "effect", "effect_sigma", "description"} <= set(torque[0])
     term = torque[0]["empirical_term"]
@@ -247,9 +246,15 @@ def test_a_cubic_torque_loss_is_not_named_churning_and_its_term_is_found():
     """A torque loss ∝ ω³ (in no catalog) fits the churning law ∝ ω|ω| to a few per cent: on a
     new user's bench it was named hydrodynamic_torque with K_v driven to 0.  With the speed split
     of the region check on the running runs (and the shape check behind it) it is refused, nothing
-    is named, and the torque's empirical term is c·ω³ with the concealed c."""
+    is named, and the torque's empirical term is c·ω³ with the concealed c (through motorid.api, whose
+    result.json warns that its values are those of a model that misses it)."""
+    from motorid import api
+
     name = "causes_extra_torque_cubic_speed"
-    doc = _diagnose(name)
+    result = api.diagnose([ROOT / name / "campaign.csv.gz"], ROOT / name / "motor.toml")
+    doc = result.document
+    # its result.json (the 1992 model alone here) says its values come from a model that misses the torque
+    assert any("unexplained in the running torque" in w for w in result.refit.warnings), result.refit.warnings
     c_true = _truth(name)["extra"]["torque_cubic_speed"]["c"]
     assert doc["mismatch"] is True and doc["mechanisms"] == []
     assert "hydrodynamic_torque" in {r["id"] for r in doc["refused_stand_ins"]}
@@ -260,15 +265,18 @@ def test_a_cubic_torque_loss_is_not_named_churning_and_its_term_is_found():
 
 
 @pytest.mark.slow  # a minute or more of diagnose: `make test-all` and `make bench`
-def test_two_causes_at_once_are_both_named_though_each_alone_fails_the_region_check():
-    """A 2 % displacement error with Stribeck friction: with either alone in the model the
-    other spoils the region splits, so the first is kept provisionally; asked again with the
-    second in the model it passes, and both are named (refusing at once named neither)."""
+def test_two_causes_at_once_are_both_named_and_each_predicts_where_it_was_not_fitted():
+    """A 2 % displacement error with Stribeck friction: both are named, each passing the region
+    check with the speed split at the running runs' median speed.  (With the split at a
+    startability run's creep, the first had failed it with the second still missing, and was kept
+    provisionally until asked again with both in the model.)"""
     name = "causes_displacement_and_stribeck"
     doc = _diagnose(name)
     assert sorted(m["id"] for m in doc["mechanisms"]) == sorted(_truth(name)["mechanisms"])
     assert doc["refused_stand_ins"] == []
-    first = next(c for c in doc["selection"][0] if c["accepted"])
-    assert first["provisional"] is True
-    rechecked = first["extrapolation"]
-    assert rechecked["with_the_final_model"] is True and rechecked["passed"] is True
+    for step in doc["selection"][:2]:
+        kept = next(c for c in step if c["accepted"])
+        check = kept["extrapolation"]
+        assert check["passed"] is True
+        speed = [sp for sp in check["splits"] if sp["split"].startswith("fit on speed up to")]
+        assert speed and float(speed[0]["split"].split("up to ")[1].split(" rpm")[0]) > 1.0

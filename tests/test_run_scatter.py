@@ -14,7 +14,7 @@ def test_the_viscosity_error_explains_the_leakage_runs_scatter_on_a_clean_campai
     which a check that forgot the viscosity would call a disagreement.  Counted, they agree, and the
     fit widens nothing."""
     _, ds, fit, _ = concealed("clean_9_seed102")
-    assert not any("scatter" in w for w in fit.warnings), fit.warnings
+    assert not any("scatter" in w or "motorid diagnose" in w for w in fit.warnings), fit.warnings
     shifts = fit.viscosity_shifts
     assert shifts is not None and shifts.shape[2] == len(fit.free)
     noise_only, runs = birge_ratio(fit, "KL0", ds)
@@ -35,6 +35,8 @@ def test_per_run_transducer_zeros_widen_the_base_parameters_to_honest_errors():
     z = {k: (fit.values[k] - v) / fit.std[k] for k, v in truth["parameters"].items()}
     assert max(abs(v) for v in z.values()) < 3.0, z
     assert abs(z["KF"]) * widened["KF"] > 10  # with the noise's error alone: far off
+    # runs that disagree tenfold send the user to diagnose (a probe's churning torque: K_v 3.9× off, silent)
+    assert len([w for w in fit.warnings if "`motorid diagnose`" in w]) == 1  # once (here by the χ²/dof line)
 
 
 def test_the_bayesian_fit_spreads_its_draws_as_the_runs_scatter_widened_the_standard_errors():
@@ -54,3 +56,15 @@ def test_the_bayesian_fit_spreads_its_draws_as_the_runs_scatter_widened_the_stan
     for k in ("KF", "TFc", "KL0", "KAB"):
         assert 0.8 < post.std[k] / fit.std[k] / plain < 1.25, (k, post.std[k], fit.std[k])
     assert any(w.startswith("KF: the draws are spread") for w in post.warnings)
+
+
+def test_runs_that_disagree_tenfold_send_the_user_to_diagnose():
+    """A churning torque ∝ ω² concealed (χ²/dof under the lack-of-fit warning's limit): K_v's runs
+    disagree more than tenfold beyond their errors, and the fit says what to do about it, once (a
+    probe's plain `motorid fit` gave K_v 3.9× its truth, z +13, with no word on diagnose)."""
+    _, _, fit, _ = concealed("hydrodynamic_torque")
+    assert fit.run_scatter["Kv"] > 10
+    pointer = [w for w in fit.warnings if "`motorid diagnose`" in w]
+    assert len(pointer) == 1, fit.warnings
+    worst = max(fit.run_scatter, key=fit.run_scatter.get)
+    assert f"disagree on {worst} {fit.run_scatter[worst]:.3g}×" in pointer[0]

@@ -416,6 +416,22 @@ def test_fit_and_predict_commands(tmp_path, capsys):
     assert len(pred) == len(pts) and pred["torque_Nm"].notna().all()
     resid = _map()["torque_Nm"] - pred["torque_Nm"]
     assert np.sqrt(np.mean(resid**2)) < 2 * NOISE["torque_Nm"]
+    # points beside a bench's logs and their channels.toml (which maps time_s) are not read through
+    # that map: it is the logs' (a probe's points file was refused as 'a time series')
+    beside = tmp_path / "bench"
+    beside.mkdir()
+    (beside / "channels.toml").write_text("""[file]
+group = "runs/*"
+[constants]
+protocol = {attribute = "test"}
+[channels]
+""" + "".join(f'{k} = {{name = "{k.split("_")[0]}{i}", unit = "{u}"}}\n' for i, (k, u) in enumerate(
+        [("time_s", "ms"), ("shaft_angle_deg", "rad"), ("speed_rpm", "rad/s"), ("torque_Nm", "lbf*ft"),
+         ("p_a_bar", "psi"), ("p_b_bar", "psi"), ("p_case_bar", "psi"), ("q_a_lpm", "gpm"), ("q_b_lpm", "gpm"),
+         ("q_case_lpm", "gpm"), ("oil_temp_C", "F")])))
+    assert main(["predict", str(tmp_path / "fit"), str(_write(pts, beside / "pts.csv")), "--out",
+                 str(tmp_path / "b.csv")]) == 0
+    assert np.allclose(pd.read_csv(tmp_path / "b.csv")["torque_Nm"], pred["torque_Nm"])
     # predictions are keyed by point_id: an id that names two points is refused in one line, nothing written
     twice = pts.copy()
     twice.loc[3, "point_id"] = twice.loc[2, "point_id"]

@@ -122,6 +122,10 @@ def birge_ratio(fit, name: str, data, shifts=None, per_run=None) -> tuple[float,
     return float(np.sum(score[carry] ** 2 / var[carry]) / (count - 1)), count
 
 
+#: runs that disagree on a parameter this many times beyond their errors send the user to diagnose
+DIAGNOSE_SCATTER = 10.0
+
+
 def widen_by_run_scatter(fit, names, data) -> list[str]:
     """Widen the standard error of each of ``names`` (fitted parameters of ``fit``) by its Birge
     ratio where its runs disagree (:func:`birge_ratio`, R² above the χ² test's 1 % point), in place
@@ -155,4 +159,11 @@ def widen_by_run_scatter(fit, names, data) -> list[str]:
         notes.append(f"{name}: its {runs} runs' own estimates scatter {factor:.3g}× beyond their errors, so its "
                      f"standard error is widened by that factor (a law that holds on average, an input of the "
                      f"model with errors of its own, or a transducer error the model does not hold)")
+    worst = max((getattr(fit, "run_scatter", None) or {}).items(), key=lambda kv: kv[1], default=None)
+    told = any("`motorid diagnose`" in w for w in getattr(fit, "warnings", None) or [])  # by the χ²/dof warning
+    if worst is not None and worst[1] >= DIAGNOSE_SCATTER and not told:
+        # a probe's churning torque ∝ ω²: K_v 3.9× its truth (z +13) with χ²/dof 1.6, and no word on what to do
+        notes.append(f"the runs disagree on {worst[0]} {worst[1]:.3g}× beyond their errors: the 1992 model misses "
+                     "something these runs see, and its values are biased by it beyond their (widened) std; "
+                     "`motorid diagnose` locates it and names it where its catalog holds it")
     return notes

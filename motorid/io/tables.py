@@ -377,6 +377,17 @@ def split_channel_map(channels) -> tuple:
     return (None, cmap) if cmap.is_log else (cmap, None)
 
 
+def _table_map_beside(path):
+    """The channel map beside ``path`` (:func:`~motorid.io.formats.find_channel_map`) where it is a
+    table's; None where there is none or it maps ``time_s`` (the map of the logs in that folder: a
+    table of points to predict beside a bench's logs was refused for it)."""
+    from motorid.io.formats import find_channel_map
+
+    found = find_channel_map(path)
+    cmap = _table_map(found) if found is not None else None
+    return None if cmap is None or cmap.is_log else cmap
+
+
 def read_mapped_table(path, spec=None, channels=None, require_outputs: bool = True) -> PointTable:
     """A foreign operating-point map (a .mat with a [grid], HDF5, Parquet, xlsx, TDMS, MDF4, any
     delimited text) read through its channel map (``channels``: path or ChannelMap; None: the map
@@ -391,8 +402,11 @@ def read_mapped_table(path, spec=None, channels=None, require_outputs: bool = Tr
     path = Path(path)
     cmap = _table_map(channels if channels is not None else find_channel_map(path))
     if cmap is not None and cmap.is_log:
-        raise InputError(f"{path}: its channel map {cmap.path} maps time_s: a time series, not an "
-                         f"operating-point table")
+        if channels is None:  # found beside it: the map of the logs in that folder, not of this table
+            cmap = None
+        else:
+            raise InputError(f"{path}: its channel map {cmap.path} maps time_s: a time series, not an "
+                             f"operating-point table")
     frame = standard_table(path, cmap)
     with tempfile.TemporaryDirectory(prefix="motorid-") as tmp:
         twin = Path(tmp) / (path.name + ".csv")
@@ -418,7 +432,7 @@ def read_tables(paths, spec=None, require_outputs: bool = True, channels=None) -
     refuse_repeats(paths, "table")
     out = []
     for p in paths:
-        if channels is not None or needs_foreign_reader(p) or find_channel_map(p) is not None:
+        if channels is not None or needs_foreign_reader(p) or _table_map_beside(p) is not None:
             out.append(read_mapped_table(p, spec, channels, require_outputs))
         else:
             out.append(read_table(p, spec, require_outputs))
