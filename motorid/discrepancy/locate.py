@@ -35,6 +35,13 @@ from motorid.discrepancy.run_segments import RunIndex, Segments
 from motorid.identify.types import RUNNING_PROTOCOLS
 from motorid.units import CHANNEL_WORDS, LPM_PER_M3S, PA_PER_BAR, RPM_PER_RAD_S, RUNNING_CHANNELS
 
+def running_runs(runs) -> np.ndarray:
+    """Per run of ``Dataset.runs``: True where it is a running protocol that turns (not a startability
+    run, whose creep as the shaft breaks away is a few thousandths of an rpm)."""
+    return runs["protocol"].isin(RUNNING_PROTOCOLS).to_numpy() & \
+        (np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)) > 0)
+
+
 #: run means taken with the sign of the rotation, grouped by |ω|: what a law of the speed leaves
 SIGNED_SPEED = "speed with the rotation's sign"
 #: the channels whose laws of the speed reverse with the rotation (the case drain's does not)
@@ -237,7 +244,7 @@ def locate(ls, dataset, spec, alpha: float = 1e-3, min_effect: float = 0.3,
     # ways, what such a law leaves cancels in the |ω| groups above; taken with the sign of the rotation
     # it adds up (an ω³ torque loss fitted by a churning law ∝ ω|ω| left only a run-to-run spread)
     turning = np.sign(runs["direction"].to_numpy(dtype=float))
-    running = runs["protocol"].isin(RUNNING_PROTOCOLS).to_numpy() & (turning != 0)
+    running = running_runs(runs) & (turning != 0)
     if (turning[running] > 0).sum() >= 2 and (turning[running] < 0).sum() >= 2:
         speed = np.where(running, np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)), np.nan)
         per_run[SIGNED_SPEED] = _quantile_groups(speed, 6, fmt=_rpm)

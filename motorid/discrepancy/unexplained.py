@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT, trend_words
+from motorid.discrepancy.locate import CHANNEL_WORDS, UNIT, running_runs, trend_words
 
 MIN_EXCESS = 50.0
 EXCESS_FRACTION = 0.1
@@ -58,15 +58,12 @@ def _determined(values: dict, std: dict, mechanism) -> bool:
 
 def region_masks(dataset) -> dict:
     """Run-level halves: ``{(low words, high words): bool per run (True = low half)}``: speed, ΔP, oil temperature."""
-    from motorid.identify.types import RUNNING_PROTOCOLS
-
     runs = dataset.runs
     out = {}
     # running runs only: a startability run's creep (a few thousandths of an rpm as the shaft breaks
     # away) had put the speed split at 0.007 rpm, so "fit on the low speeds, predict the high" fitted
     # on the breakaways alone and the speed half of the check never counted
-    moving = runs["protocol"].isin(RUNNING_PROTOCOLS).to_numpy() & \
-        (np.abs(runs["speed_median_rad_s"].to_numpy(dtype=float)) > 0)
+    moving = running_runs(runs)
     for var, col, unit, f in (("speed", "speed_median_rad_s", "rpm", 60 / (2 * np.pi)),
                               ("pressure difference", "dp_median_Pa", "bar", 1e-5),
                               ("oil temperature", "temp_median_C", "°C", 1.0)):
@@ -233,12 +230,14 @@ def stand_ins_by_shape(accepted_mechanisms, final, dataset, spec, structures) ->
     run_of = np.asarray(dataset.run_of_sample, dtype=int)
     values = {k: float(v) for k, v in final.params_all.items()}
     mechs = list(final.mechanisms)
+    with_it = None
     for i, mech in enumerate(accepted_mechanisms):
         acts = [c for c in channels if c in mech.channels]
         if not acts:
             continue
         off = dict(values, **{k: float(v) for k, v in mech.neutral().items()})
-        with_it = model.predict(values, spec, dataset.running, mechs)
+        if with_it is None:  # the final model's predictions: the same for every mechanism asked
+            with_it = model.predict(values, spec, dataset.running, mechs)
         without = model.predict(off, spec, dataset.running, mechs)
         for c in acts:
             change = np.asarray(getattr(with_it, c)) - np.asarray(getattr(without, c))
