@@ -154,12 +154,15 @@ def _save(path: Path, compiled, hlo_text: str) -> None:
 _LIBC: list = []  # the C library, looked up once (find_library runs a subprocess)
 
 
-def trim_heap() -> None:
+def trim_heap(collect: bool = True) -> None:
     """Return freed heap pages to the system (glibc's ``malloc_trim``; elsewhere nothing): the
-    executables of XLA are freed into the C heap, which keeps them resident otherwise."""
+    executables of XLA are freed into the C heap, which keeps them resident otherwise.  ``collect``:
+    first a full garbage collection (for what only cycles hold; 70-90 ms with diagnose's objects
+    alive, so diagnose's many steps leave it to the one before its final fit)."""
     import gc
 
-    gc.collect()
+    if collect:
+        gc.collect()
     if not _LIBC:
         import ctypes
         import ctypes.util
@@ -226,18 +229,18 @@ class cached_jit:  # noqa: N801 - used as a decorator, like jax.jit
         return dropped
 
     @classmethod
-    def release_all(cls) -> int:
+    def release_all(cls, collect: bool = True) -> int:
         """Drop from memory every compiled program that is kept on disk, and hand the freed heap
         back to the system (each executable holds a few MB; a later call loads it from disk
         again, in milliseconds; a program only in memory stays, as compiling it again would
-        cost seconds) → how many were dropped."""
+        cost seconds; ``collect``: as :func:`trim_heap`'s) → how many were dropped."""
         dropped = 0
         for inst in cls._instances:
             for key in [k for k in inst._memory if k in inst._files and inst._files[k].exists()]:
                 del inst._memory[key]
                 dropped += 1
         if dropped:
-            trim_heap()
+            trim_heap(collect)
         return dropped
 
     def _call_flat(self, dyn, leaves, dynamic, treedef):

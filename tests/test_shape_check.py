@@ -79,3 +79,23 @@ def test_a_true_churning_law_alone_is_kept(seed):
     residual, change, sigma = _as_named(x, -1.2e-4 * x.speed * np.abs(x.speed), rng)
     check = law_shape_check("torque", x, residual, change, sigma, run_of, _Spec)
     assert check is None or not check["stand_in"], check
+
+
+def test_a_meter_zero_beside_a_leftover_of_another_cause_is_not_refused_by_its_shape():
+    """A flow meter's zero offset is the model's own constant shape: the ω term a second cause leaves
+    (a speed gain error: swept flow ∝ ω) must not make it 'add 0' and be refused (the foreign bench's
+    n12 campaign, a true 5σ offset on port A)."""
+    x, run_of, rng = _samples(4)
+    noise = 2e-7
+    y = 2.3e-7 + 5e-9 * x.speed + noise * rng.standard_normal(x.speed.size)
+    law = np.ones_like(y)
+    A = np.column_stack([nuisance("q_a", x, _Spec), law])
+    b = np.linalg.lstsq(A, y, rcond=None)[0]
+    residual, change = y - A @ b, b[-1] * law
+    assert law_shape_check("q_a", x, residual, change, np.full(y.size, noise), run_of, _Spec) is None
+    # the same leftover beside a law that is not one of the shapes is still asked (and here kept)
+    law = x.speed * np.abs(x.speed)
+    A = np.column_stack([nuisance("q_a", x, _Spec), law])
+    b = np.linalg.lstsq(A, y, rcond=None)[0]
+    check = law_shape_check("q_a", x, y - A @ b, b[-1] * law, np.full(y.size, noise), run_of, _Spec)
+    assert check is not None and check["stand_in"] and "ω" in check["terms"], check

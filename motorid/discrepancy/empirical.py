@@ -318,6 +318,21 @@ def _prepared(channel, x, residual, sigma, run_of, spec, folds: int, harmonics: 
 REDUNDANT_SHARE = 0.1
 #: ... and those terms lower the held-out χ² by at least this much
 MIN_SHAPE_GAIN = 50.0
+#: a law whose column lies within this share (RMS) of the model's own shapes in its channel is one of them
+OWN_SHAPE_SHARE = 1e-3
+
+
+def own_shape(shapes, column) -> bool:
+    """Whether ``column`` (a law's change, weighted and scaled like the design) is, on these samples,
+    one of the 1992 model's own shapes ``shapes`` (the design's first columns, which take a constant):
+    a meter's zero offset is the constant itself, so the terms cannot make it redundant by its shape,
+    nor can its shape be judged against them (a probe's flow-meter zero on port A, true and 5σ, was
+    refused as "adding 0" beside a leftover ∝ ω of another cause)."""
+    norm = float(np.sqrt(np.mean(column**2)))
+    if norm == 0:
+        return True
+    coef = np.linalg.lstsq(shapes, column, rcond=None)[0]
+    return float(np.sqrt(np.mean((column - shapes @ coef) ** 2))) < OWN_SHAPE_SHARE * norm
 
 
 def law_shape_check(channel: str, x, residual, change, sigma, run_of, spec, folds: int = 3,
@@ -335,13 +350,16 @@ def law_shape_check(channel: str, x, residual, change, sigma, run_of, spec, fold
     nothing.  A true law with a second effect beside it is kept: the terms take the second effect, and
     the law stays needed beside them.
     → {stand_in, terms, law_left, both_left, terms_left} (held-out χ² of the model's shapes with the law,
-    with the law and the terms, with the terms alone), or None (too few runs, no term chosen)."""
+    with the law and the terms, with the terms alone), or None (too few runs, no term chosen, or a law
+    that is itself one of the model's shapes there: :func:`own_shape`, a meter's zero offset)."""
     target = np.asarray(residual, float) + np.asarray(change, float)
     prep = _prepared(channel, x, target, sigma, run_of, spec, folds, harmonics, extra=change)
     if prep is None:
         return None
     Z, y, k, terms, *_rest, fold = prep
     g = Z.shape[1] - 1  # the law's column, last: moved beside the model's shapes, free like them
+    if own_shape(Z[:, :k], Z[:, g]):  # a meter's zero is the shapes' constant: its shape cannot be judged
+        return None
     order = list(range(k)) + [g] + list(range(k, g))
     chosen, law_left, both_left = _forward(Z[:, order], y, k + 1, fold, folds)
     if not chosen:

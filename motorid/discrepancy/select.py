@@ -325,7 +325,9 @@ def diagnose(dataset, spec, base: FitResult | None = None, mechanisms=None, min_
 
     def lap(step: str) -> None:
         jax.clear_caches()  # the eager operations of the step (its compiled programs: next line)
-        cached_jit.release_all()
+        # the executables are freed by their references going: no full garbage collection at every step
+        # (1.4 s of a 20 s diagnose on 290 k rows, and no less peak memory); one before the final fit
+        cached_jit.release_all(collect=False)
         now = time.perf_counter()
         seconds[step] = seconds.get(step, 0.0) + now - clock[0]
         clock[0] = now
